@@ -1,0 +1,3 @@
+#include <firefly/parallel.hpp>
+#include <firefly/parallel.hpp>  // include guard
+int firefly_parallel_hpp_tu() { return 0; }

@@ -1,0 +1,108 @@
+// firefly: the half-buffer highlight check (paper, section 5).
+//
+// A pixel that is an outlier in BOTH halves is taken for a real highlight and keeps its
+// values; an outlier in one half only is a firefly. Two unrelated fireflies can land on
+// the same pixel by chance, though (at a 0.6% firefly rate per half, about 5 pixels in
+// 120k), and every such pixel kept is a huge error. The stricter rules ask more of the pair:
+//
+//   same_pixel   the paper's rule: outlier in both halves
+//   agree        and the halves' mean radiance agrees within a factor (max/min <= max_ratio)
+//   confident    and the relative standard error of the pixel's mean over both halves,
+//                sqrt(var(A) + var(B)) / |A + B| (variances of the half means), is at most
+//                max_relative_error. A firefly is one sample carrying the pixel: one in each
+//                half gives at least 1/sqrt(2) = 0.71, and 1 when one dominates. A highlight
+//                is many samples that agree: c / sqrt(2N) for N samples per half of relative
+//                spread c (0.22 for c = 2.5, N = 64). Both halves together halve the noise
+//                of the estimate compared with a test per half.
+//   confident_and_agree   both of the above
+//
+// An outlier in ONE half only is a firefly in the paper. It must also stand out against the
+// other half, though: a firefly makes its half exceed the other by many times the noise,
+// while a bright, noisy but legitimate pixel (a thin line, a checker cell) that the global
+// test flags in one half only agrees with the other half within the noise. With
+// min_excess_z > 0 such an outlier is reconstructed only when
+//     (L_out - L_other) / sqrt(2 var_other) > min_excess_z
+// (variances calibrated to variances of the mean, as below); 0 is the paper's behaviour.
+//
+// "Variance" means different things in different renderers (of the samples, or of the
+// pixel mean). The confident rule calibrates it from the data: for an ordinary pixel,
+// (A - B)^2 / (vA + vB) follows a chi-square with one degree of freedom when v is the
+// variance of the mean, whose median is 0.4549; the median of the observed ratios over
+// ordinary pixels, divided by 0.4549, is the factor that turns the given variance into a
+// variance of the mean. A median, so the few heavy-tailed pixels do not move it.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace firefly {
+
+enum class highlight_rule : std::uint8_t { same_pixel, agree, confident, confident_and_agree };
+
+struct highlight_options {
+    highlight_rule rule = highlight_rule::confident;
+    double max_ratio = 4.0;            // agree: max(LA, LB) / min(LA, LB)
+    double max_relative_error = 0.5;   // confident: sqrt(vA + vB) / |A + B|, calibrated
+    double min_excess_z = 4.0;         // one-half outliers: required excess over the other half
+};
+
+// Decide an outlier of one half only: true when it stands out against the other half.
+// l_out, l_other: mean colour in the outlier's half and in the other; v_other: the other
+// half's reduced variance; calibration as for is_highlight.
+inline bool exceeds_other_half(const highlight_options& o, double l_out, double l_other,
+                               double v_other, double calibration) noexcept {
+    if (!(o.min_excess_z > 0)) return true;
+    const double noise = std::sqrt(2.0 * std::max(v_other, 0.0) * calibration);
+    return l_out - l_other > o.min_excess_z * noise;
+}
+
+inline constexpr double chi2_1_median = 0.45493642311957184;
+
+// The factor that turns the renderer's variance into a variance of the pixel mean: the
+// median of (A_c - B_c)^2 / (vA_c + vB_c) over ordinary pixels, over chi2_1_median.
+class variance_calibration {
+public:
+    void add(double a, double b, double va, double vb) {
+        const double v = std::max(va, 0.0) + std::max(vb, 0.0);
+        const double d = a - b;
+        if (v > 0 && std::isfinite(v) && std::isfinite(d)) ratios_.push_back(d * d / v);
+    }
+    // 1 when there is too little to learn from; clamped to a sane range otherwise.
+    double factor() {
+        if (ratios_.size() < 32) return 1.0;
+        const auto mid = ratios_.begin() + static_cast<std::ptrdiff_t>(ratios_.size() / 2);
+        std::nth_element(ratios_.begin(), mid, ratios_.end());
+        const double f = *mid / chi2_1_median;
+        return f > 0 ? std::clamp(f, 1e-8, 1e8) : 1.0;
+    }
+    void clear() noexcept { ratios_.clear(); }
+    std::size_t size() const noexcept { return ratios_.size(); }
+
+private:
+    std::vector<double> ratios_;
+};
+
+// Decide one pixel that is an outlier in both halves. la, lb: mean colour of the pixel in
+// each half; va, vb: its reduced variance in each half; calibration: variance_calibration::factor().
+inline bool is_highlight(const highlight_options& o, double la, double lb, double va, double vb,
+                         double calibration) noexcept {
+    const bool want_agree =
+        o.rule == highlight_rule::agree || o.rule == highlight_rule::confident_and_agree;
+    const bool want_conf =
+        o.rule == highlight_rule::confident || o.rule == highlight_rule::confident_and_agree;
+    if (want_agree) {
+        const double lo = std::min(std::fabs(la), std::fabs(lb));
+        const double hi = std::max(std::fabs(la), std::fabs(lb));
+        if (!(hi <= o.max_ratio * lo)) return false;
+    }
+    if (want_conf) {
+        const double se = std::sqrt((std::max(va, 0.0) + std::max(vb, 0.0)) * calibration);
+        if (!(se <= o.max_relative_error * std::fabs(la + lb))) return false;
+    }
+    return true;
+}
+
+}  // namespace firefly

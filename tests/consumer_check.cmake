@@ -1,0 +1,59 @@
+# Builds tests/consumer as a user would: against an installed firefly (find_package), through
+# add_subdirectory, or by dropping include/firefly into a code base and compiling by hand.
+cmake_minimum_required(VERSION 3.16)
+file(REMOVE_RECURSE "${WORK}")
+file(MAKE_DIRECTORY "${WORK}")
+
+function(run)
+  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "failed (${rc}): ${ARGN}\n${out}\n${err}")
+  endif()
+endfunction()
+
+if(MODE STREQUAL "find_package")
+  # Install firefly alone (no tests, benchmarks or examples) to a temporary prefix.
+  run(${CMAKE_COMMAND} -S "${FIREFLY_SOURCE}" -B "${WORK}/firefly-build" -G "${GENERATOR}"
+      -DCMAKE_INSTALL_PREFIX=${WORK}/prefix -DFIREFLY_BUILD_TESTS=OFF
+      -DFIREFLY_BUILD_BENCHMARKS=OFF -DFIREFLY_BUILD_EXAMPLES=OFF -DFIREFLY_INSTALL=ON)
+  run(${CMAKE_COMMAND} --build "${WORK}/firefly-build")
+  run(${CMAKE_COMMAND} --install "${WORK}/firefly-build")
+  foreach(f include/firefly/firefly.hpp share/cmake/firefly/fireflyConfig.cmake
+            share/cmake/firefly/fireflyConfigVersion.cmake share/pkgconfig/firefly.pc)
+    if(NOT EXISTS "${WORK}/prefix/${f}")
+      message(FATAL_ERROR "not installed: ${f}")
+    endif()
+  endforeach()
+  run(${CMAKE_COMMAND} -S "${CONSUMER}" -B "${WORK}/consumer-build" -G "${GENERATOR}"
+      -DCMAKE_CXX_COMPILER=${CXX} -DCONSUMER_MODE=find_package -DCMAKE_PREFIX_PATH=${WORK}/prefix)
+  run(${CMAKE_COMMAND} --build "${WORK}/consumer-build")
+  run("${WORK}/consumer-build/consumer")
+  # An incompatible major version must be refused.
+  execute_process(COMMAND ${CMAKE_COMMAND} -S "${CONSUMER}" -B "${WORK}/consumer-v99" -G "${GENERATOR}"
+      -DCONSUMER_MODE=find_package -DCONSUMER_VERSION=99 -DCMAKE_PREFIX_PATH=${WORK}/prefix
+      RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
+  if(rc EQUAL 0)
+    message(FATAL_ERROR "find_package(firefly 99) succeeded against an older major version")
+  endif()
+  # pkg-config users get the include path.
+  file(READ "${WORK}/prefix/share/pkgconfig/firefly.pc" pc)
+  if(NOT pc MATCHES "Cflags: -I")
+    message(FATAL_ERROR "firefly.pc has no Cflags")
+  endif()
+elseif(MODE STREQUAL "add_subdirectory")
+  run(${CMAKE_COMMAND} -S "${CONSUMER}" -B "${WORK}/consumer-build" -G "${GENERATOR}"
+      -DCMAKE_CXX_COMPILER=${CXX} -DCONSUMER_MODE=add_subdirectory -DFIREFLY_SOURCE=${FIREFLY_SOURCE})
+  run(${CMAKE_COMMAND} --build "${WORK}/consumer-build")
+  run("${WORK}/consumer-build/consumer")
+  # The consumer's build must not contain any of firefly's own targets.
+  if(EXISTS "${WORK}/consumer-build/firefly/tests" OR EXISTS "${WORK}/consumer-build/firefly/bench")
+    message(FATAL_ERROR "add_subdirectory built firefly's tests or benchmarks")
+  endif()
+elseif(MODE STREQUAL "header_drop")
+  file(COPY "${FIREFLY_SOURCE}/include/firefly" DESTINATION "${WORK}/vendor")
+  run(${CXX} -std=c++17 -fno-exceptions -Wall -Wextra -Wpedantic -Werror
+      -I "${WORK}/vendor" "${CONSUMER}/main.cpp" -o "${WORK}/consumer" -pthread)
+  run("${WORK}/consumer")
+else()
+  message(FATAL_ERROR "unknown MODE ${MODE}")
+endif()

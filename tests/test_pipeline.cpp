@@ -1,0 +1,268 @@
+#include <firefly/firefly.hpp>
+#include <firefly/sim/metrics.hpp>
+#include <firefly/sim/scene.hpp>
+
+#include <cfloat>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <vector>
+
+#include "catch.hpp"
+
+using namespace firefly;
+
+namespace {
+struct halves {
+    sim::frame f;
+    half_buffer<float> h[2];
+    explicit halves(sim::frame fr) : f(std::move(fr)) {
+        for (int i = 0; i < 2; ++i) {
+            h[i].color = *make_image_view(f.color[i].data(), f.width, f.height, 3);
+            h[i].variance = *make_image_view(f.variance[i].data(), f.width, f.height, 3);
+            if (!f.alpha.empty())
+                h[i].alpha = *make_image_view(static_cast<const float*>(f.alpha.data()), f.width, f.height, 1);
+        }
+    }
+    halves(const halves&) = delete;
+};
+
+// A flat noisy frame with hand-placed events.
+sim::frame flat(int w, int h, unsigned seed) {
+    sim::scene s = sim::named_scene("flat", w, h, seed);
+    return sim::simulate(s);
+}
+void spike(sim::frame& f, int half, int x, int y, float value) {
+    const std::size_t i = static_cast<std::size_t>(y * f.width + x);
+    for (int c = 0; c < 3; ++c) {
+        f.color[half][i * 3 + c] = value;
+        // One sample carries the pixel: the variance of the mean is about the mean squared.
+        f.variance[half][i * 3 + c] = value * value;
+    }
+}
+}  // namespace
+
+TEST_CASE("an outlier in both halves is kept, bit-identical; in one half it is rebuilt", "[pipeline]") {
+    sim::frame f = flat(64, 48, 1);
+    spike(f, 0, 10, 10, 500.0f);  // firefly in A only
+    spike(f, 1, 30, 20, 500.0f);  // firefly in B only
+    // a highlight: bright in both halves with a small relative error (many samples agree)
+    for (int half = 0; half < 2; ++half) {
+        const std::size_t i = static_cast<std::size_t>(40 * 64 + 50);
+        for (int c = 0; c < 3; ++c) {
+            f.color[half][i * 3 + c] = 40.0f + static_cast<float>(half);
+            f.variance[half][i * 3 + c] = 16.0f;  // relative standard error 0.1
+        }
+    }
+    const sim::frame orig = f;
+    halves hv(f);
+    std::vector<std::uint8_t> ma(64 * 48), mb(64 * 48);
+    detector d;
+    const frame_report r = d.process(hv.h[0], hv.h[1], *make_image_view(ma.data(), 64, 48),
+                                     *make_image_view(mb.data(), 64, 48));
+    REQUIRE(r.error.ok());
+    const std::size_t fa = 10 * 64 + 10, fb = 20 * 64 + 30, hl = 40 * 64 + 50;
+    CHECK(ma[fa] == mask_bits::firefly);
+    CHECK(mb[fb] == mask_bits::firefly);
+    CHECK(ma[hl] == mask_bits::highlight);
+    CHECK(mb[hl] == mask_bits::highlight);
+    CHECK(r.half[0].highlights == 1);
+    CHECK(r.half[1].highlights == 1);
+    for (int c = 0; c < 3; ++c) {
+        CHECK(hv.f.color[0][fa * 3 + c] < 5.0f);           // rebuilt in A
+        CHECK(hv.f.color[1][fa * 3 + c] == orig.color[1][fa * 3 + c]);  // untouched in B
+        CHECK(hv.f.color[1][fb * 3 + c] < 5.0f);
+        CHECK(hv.f.color[0][hl * 3 + c] == orig.color[0][hl * 3 + c]);  // highlight kept
+        CHECK(hv.f.color[1][hl * 3 + c] == orig.color[1][hl * 3 + c]);
+        CHECK(hv.f.variance[0][fa * 3 + c] < 1.0f);        // variance rebuilt too
+    }
+    // every pixel not reconstructed is bit-identical
+    for (int half = 0; half < 2; ++half)
+        for (std::size_t i = 0; i < 64 * 48; ++i) {
+            if ((half == 0 ? ma : mb)[i] & (mask_bits::firefly | mask_bits::nonfinite)) continue;
+            CHECK(std::memcmp(&hv.f.color[half][i * 3], &orig.color[half][i * 3], 12) == 0);
+            CHECK(std::memcmp(&hv.f.variance[half][i * 3], &orig.variance[half][i * 3], 12) == 0);
+        }
+}
+
+TEST_CASE("two unrelated fireflies on one pixel are not a highlight (default rule)", "[pipeline][highlight]") {
+    sim::frame f = flat(64, 48, 2);
+    spike(f, 0, 20, 20, 300.0f);
+    spike(f, 1, 20, 20, 900.0f);  // relative error ~1 in both halves: fireflies
+    halves hv(f);
+    detector d;
+    frame_report r = d.process(hv.h[0], hv.h[1]);
+    CHECK(r.both_outliers == 1);
+    CHECK(r.half[0].highlights == 0);
+    CHECK(hv.f.color[0][(20 * 64 + 20) * 3] < 5.0f);
+    CHECK(hv.f.color[1][(20 * 64 + 20) * 3] < 5.0f);
+    // the paper's rule keeps it
+    sim::frame g = flat(64, 48, 2);
+    spike(g, 0, 20, 20, 300.0f);
+    spike(g, 1, 20, 20, 900.0f);
+    halves hg(g);
+    detector_options o;
+    o.highlight.rule = highlight_rule::same_pixel;
+    detector paper(o);
+    r = paper.process(hg.h[0], hg.h[1]);
+    CHECK(r.half[0].highlights == 1);
+    CHECK(hg.f.color[0][(20 * 64 + 20) * 3] == 300.0f);
+}
+
+TEST_CASE("NaN and Inf pixels are repaired", "[pipeline]") {
+    sim::frame f = flat(40, 30, 3);
+    f.color[0][(5 * 40 + 5) * 3 + 1] = std::numeric_limits<float>::quiet_NaN();
+    f.variance[1][(7 * 40 + 9) * 3] = std::numeric_limits<float>::infinity();
+    f.color[1][0] = -std::numeric_limits<float>::infinity();
+    halves hv(f);
+    detector d;
+    const frame_report r = d.process(hv.h[0], hv.h[1]);
+    REQUIRE(r.error.ok());
+    CHECK(r.half[0].repaired == 1);
+    CHECK(r.half[1].repaired == 2);
+    for (int half = 0; half < 2; ++half) {
+        for (float v : hv.f.color[half]) CHECK(std::isfinite(v));
+        for (float v : hv.f.variance[half]) CHECK(std::isfinite(v));
+    }
+}
+
+TEST_CASE("one thread and two threads give bit-identical outputs", "[pipeline][invariant]") {
+    const sim::scene s = sim::named_scene("production", 160, 120, 5);
+    halves a(sim::simulate(s)), b(sim::simulate(s));
+    detector serial;
+    detector threaded(detector_options{}, executor::threads(2));
+    const frame_report ra = serial.process(a.h[0], a.h[1]);
+    const frame_report rb = threaded.process(b.h[0], b.h[1]);
+    CHECK(ra.half[0].fireflies == rb.half[0].fireflies);
+    CHECK(ra.half[1].outliers == rb.half[1].outliers);
+    for (int half = 0; half < 2; ++half) {
+        CHECK(std::memcmp(a.f.color[half].data(), b.f.color[half].data(), a.f.color[half].size() * 4) == 0);
+        CHECK(std::memcmp(a.f.variance[half].data(), b.f.variance[half].data(), a.f.variance[half].size() * 4) == 0);
+    }
+    // and a caller's own parallel-for hook
+    halves c(sim::simulate(s));
+    int calls = 0;
+    detector hooked(detector_options{}, executor([&](std::size_t n, const executor::task& t) {
+                        ++calls;
+                        for (std::size_t i = n; i-- > 0;) t(i);  // reverse order on purpose
+                    }));
+    (void)hooked.process(c.h[0], c.h[1]);
+    CHECK(calls == 2);
+    CHECK(std::memcmp(a.f.color[0].data(), c.f.color[0].data(), a.f.color[0].size() * 4) == 0);
+}
+
+TEST_CASE("the detector's lambda cache is reused by the second frame", "[pipeline]") {
+    const sim::scene s = sim::named_scene("sparse_fireflies", 128, 96, 6);
+    halves a(sim::simulate(s)), b(sim::simulate(s));
+    detector d;
+    const frame_report r1 = d.process(a.h[0], a.h[1]);
+    const frame_report r2 = d.process(b.h[0], b.h[1]);
+    CHECK(r1.lambdas_computed > 0);
+    CHECK(r2.lambdas_computed == 0);
+    CHECK(r1.half[0].outliers == r2.half[0].outliers);
+}
+
+TEST_CASE("bad input is an error value and changes nothing", "[pipeline][errors]") {
+    sim::frame f = flat(16, 12, 4), g = flat(16, 10, 4);
+    halves a(f), b(g);
+    const std::vector<float> before = a.f.color[0];
+    detector d;
+    CHECK(d.process(a.h[0], b.h[1]).error.code() == errc::size_mismatch);
+    half_buffer<float> bad = a.h[1];
+    bad.variance = *a.h[1].variance.channel_range(0, 2);
+    CHECK(d.process(a.h[0], bad).error.code() == errc::channel_mismatch);
+    bad = a.h[1];
+    bad.alpha = *b.h[0].alpha.subview(0, 0, 0, 0);
+    CHECK(d.process(a.h[0], bad).error.ok());  // empty alpha means none
+    std::vector<float> alpha(8, 1.0f);
+    bad.alpha = *make_image_view(static_cast<const float*>(alpha.data()), 4, 2);
+    CHECK(d.process(a.h[0], bad).error.code() == errc::size_mismatch);
+    bad = a.h[1];
+    bad.color = image_view<float>();
+    CHECK(d.process(a.h[0], bad).error.code() == errc::empty_image);
+    std::vector<std::uint8_t> m(10);
+    CHECK(d.process(a.h[0], a.h[1], *make_image_view(m.data(), 5, 2)).error.code() == errc::size_mismatch);
+    detector_options o;
+    o.alpha = 0;
+    d.set_options(o);
+    const std::vector<float> before2 = a.f.color[0];
+    CHECK(d.process(a.h[0], a.h[1]).error.code() == errc::invalid_argument);
+    CHECK(a.f.color[0] == before2);
+    o = detector_options{};
+    o.reconstruction.kernel_width = 6;
+    d.set_options(o);
+    CHECK(d.process(a.h[0], a.h[1]).error.code() == errc::invalid_argument);
+    (void)before;
+}
+
+TEST_CASE("constant, 1x1, all-black and all-NaN frames", "[pipeline][hard]") {
+    detector d;
+    for (int size : {1, 2, 5}) {
+        std::vector<float> c(static_cast<std::size_t>(size * size * 3), 0.5f), v(c.size(), 0.01f);
+        std::vector<float> c2 = c, v2 = v;
+        half_buffer<float> a{*make_image_view(c.data(), size, size, 3), *make_image_view(v.data(), size, size, 3), {}};
+        half_buffer<float> b{*make_image_view(c2.data(), size, size, 3), *make_image_view(v2.data(), size, size, 3), {}};
+        const frame_report r = d.process(a, b);
+        CHECK(r.error.ok());
+        CHECK(r.half[0].outliers == 0);
+        for (float x : c) CHECK(x == 0.5f);
+    }
+    std::vector<float> black(30, 0.0f), bv(30, 0.0f), black2 = black, bv2 = bv;
+    half_buffer<float> a{*make_image_view(black.data(), 5, 2, 3), *make_image_view(bv.data(), 5, 2, 3), {}};
+    half_buffer<float> b{*make_image_view(black2.data(), 5, 2, 3), *make_image_view(bv2.data(), 5, 2, 3), {}};
+    frame_report r = d.process(a, b);
+    CHECK(r.error.ok());
+    CHECK(r.half[0].ignored == 10);
+    std::vector<float> nan(30, std::numeric_limits<float>::quiet_NaN()), nv = nan, nan2 = nan, nv2 = nan;
+    half_buffer<float> na{*make_image_view(nan.data(), 5, 2, 3), *make_image_view(nv.data(), 5, 2, 3), {}};
+    half_buffer<float> nb{*make_image_view(nan2.data(), 5, 2, 3), *make_image_view(nv2.data(), 5, 2, 3), {}};
+    r = d.process(na, nb);
+    CHECK(r.error.ok());
+    CHECK(r.half[0].reconstruction.code() == errc::no_valid_pixels);
+    for (float x : nan) CHECK(x == 0.0f);  // nothing stays NaN
+    // 1e30 fireflies next to 1e-3 pixels, and FLT_MAX
+    sim::frame f = flat(50, 40, 8);
+    for (auto& x : f.color[0]) x *= 0.002f;
+    for (auto& x : f.variance[0]) x *= 4e-6f;
+    spike(f, 0, 3, 4, 1e30f);
+    spike(f, 0, 30, 30, FLT_MAX);
+    for (const std::size_t i : {std::size_t{4 * 50 + 3}, std::size_t{30 * 50 + 30}})
+        for (int c = 0; c < 3; ++c) f.variance[0][i * 3 + c] = FLT_MAX;  // finite, huge
+    halves hv(f);
+    r = d.process(hv.h[0], hv.h[1]);
+    CHECK(r.half[0].fireflies >= 2);
+    for (float x : hv.f.color[0]) CHECK(x < 1.0f);
+    for (float x : hv.f.variance[0]) CHECK(std::isfinite(x));
+}
+
+TEST_CASE("double images and strided (RGBA, padded) views", "[pipeline]") {
+    const int w = 48, h = 32;
+    sim::frame f = flat(w, h, 12);
+    spike(f, 0, 7, 7, 400.0f);
+    // Both halves as double: A packed RGB, B's colour inside an RGBA buffer whose fourth
+    // channel is its alpha.
+    std::vector<double> ac(f.color[0].begin(), f.color[0].end()), av(f.variance[0].begin(), f.variance[0].end());
+    std::vector<double> bv(f.variance[1].begin(), f.variance[1].end());
+    std::vector<double> rgba(static_cast<std::size_t>(w * h * 4), 1.0);
+    for (std::size_t i = 0; i < static_cast<std::size_t>(w * h); ++i)
+        for (int c = 0; c < 3; ++c) rgba[i * 4 + c] = f.color[1][i * 3 + c];
+    auto rgba_view = *make_image_view(rgba.data(), w, h, 4);
+    half_buffer<double> a{*make_image_view(ac.data(), w, h, 3), *make_image_view(av.data(), w, h, 3), {}};
+    half_buffer<double> b{*rgba_view.channel_range(0, 3), *make_image_view(bv.data(), w, h, 3), *rgba_view.channel_range(3, 1)};
+    detector d;
+    const frame_report r = d.process(a, b);
+    REQUIRE(r.error.ok());
+    CHECK(r.half[0].fireflies == 1);
+    CHECK(ac[(7 * w + 7) * 3] < 5.0);
+    for (std::size_t i = 0; i < static_cast<std::size_t>(w * h); ++i) CHECK(rgba[i * 4 + 3] == 1.0);  // alpha untouched
+}
+
+TEST_CASE("combine_halves: mean and variance of the mean", "[pipeline]") {
+    std::vector<float> a = {1, 2, 3}, b = {3, 4, 5}, va = {4, 4, 4}, vb = {8, 8, 8}, out(3), ov(3);
+    auto V = [](std::vector<float>& x) { return *make_image_view(x.data(), 1, 1, 3); };
+    REQUIRE(combine_halves(V(a), V(b), V(out), V(va), V(vb), V(ov)).ok());
+    CHECK(out == std::vector<float>{2, 3, 4});
+    CHECK(ov == std::vector<float>{3, 3, 3});
+    std::vector<float> small(2);
+    CHECK(combine_halves(V(a), V(b), *make_image_view(small.data(), 2, 1, 1)).code() == errc::size_mismatch);
+}

@@ -1,0 +1,244 @@
+#include <firefly/reconstruct.hpp>
+#include <firefly/stddev.hpp>
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <vector>
+
+#include "catch.hpp"
+
+using namespace firefly;
+
+namespace {
+struct img {
+    int w, h, c;
+    std::vector<float> px;
+    img(int w_, int h_, int c_) : w(w_), h(h_), c(c_), px(static_cast<std::size_t>(w_ * h_ * c_)) {}
+    float& at(int x, int y, int ch) { return px[static_cast<std::size_t>((y * w + x) * c + ch)]; }
+    image_view<float> view() { return *make_image_view(px.data(), w, h, c); }
+};
+
+// Deterministic pseudo-random fill.
+void fill(img& im, unsigned seed) {
+    std::uint32_t s = seed * 2654435761u + 1;
+    for (auto& v : im.px) {
+        s = s * 1664525u + 1013904223u;
+        v = static_cast<float>((s >> 8) & 0xffff) / 65536.0f + 0.1f;
+    }
+}
+
+// Apply one of the 8 symmetries of the square to (x, y) in a w x w image.
+void sym(int k, int w, int x, int y, int& u, int& v) {
+    int a = x, b = y;
+    if (k & 4) std::swap(a, b);
+    if (k & 1) a = w - 1 - a;
+    if (k & 2) b = w - 1 - b;
+    u = a;
+    v = b;
+}
+}  // namespace
+
+TEST_CASE("the paper's 2 2 x x 8 8 row has no directional bias", "[reconstruct]") {
+    img im(6, 1, 1);
+    const float row[6] = {2, 2, 1000, 1000, 8, 8};
+    for (int x = 0; x < 6; ++x) im.at(x, 0, 0) = row[x];
+    std::vector<std::uint8_t> mask = {0, 0, 1, 1, 0, 0};
+    reconstruct_scratch s;
+    const reconstruct_report r = reconstruct(im.view(), image_view<float>(), mask.data(), {}, s);
+    REQUIRE(r.error.ok());
+    CHECK(r.pixels == 2);
+    // symmetric: the two x's mirror each other around 5
+    CHECK(im.at(2, 0, 0) + im.at(3, 0, 0) == Approx(10.0f));
+    CHECK(im.at(2, 0, 0) > 2.0f);
+    CHECK(im.at(3, 0, 0) < 8.0f);
+    CHECK(im.at(2, 0, 0) < im.at(3, 0, 0));
+    // untouched pixels are bit-identical
+    CHECK(im.at(0, 0, 0) == 2.0f);
+    CHECK(im.at(5, 0, 0) == 8.0f);
+}
+
+TEST_CASE("flips and transposes give bit-identical results", "[reconstruct][invariant]") {
+    const int w = 17;
+    img base(w, w, 3);
+    fill(base, 3);
+    std::vector<std::uint8_t> mask(static_cast<std::size_t>(w * w), 0);
+    // a cluster wider than the kernel, an isolated pixel, a border pixel, a corner pixel
+    for (int y = 4; y < 12; ++y)
+        for (int x = 3; x < 10; ++x) mask[static_cast<std::size_t>(y * w + x)] = 1;
+    mask[static_cast<std::size_t>(2 * w + 14)] = 1;
+    mask[static_cast<std::size_t>(0 * w + 7)] = 1;
+    mask[static_cast<std::size_t>(16 * w + 16)] = 1;
+    for (std::size_t i = 0; i < mask.size(); ++i)
+        if (mask[i]) base.px[i * 3] = 1e6f;  // the firefly values must not matter
+    reconstruct_options o;
+    o.max_iterations = 50;
+    o.tolerance = 0;  // run every iteration: a long chain of arithmetic to keep symmetric
+    img ref = base;
+    reconstruct_scratch s;
+    const reconstruct_report r0 = reconstruct(ref.view(), image_view<float>(), mask.data(), o, s);
+    CHECK(r0.phase1_rounds >= 2);
+    for (int k = 1; k < 8; ++k) {
+        img t(w, w, 3);
+        std::vector<std::uint8_t> tm(mask.size());
+        for (int y = 0; y < w; ++y)
+            for (int x = 0; x < w; ++x) {
+                int u, v;
+                sym(k, w, x, y, u, v);
+                for (int c = 0; c < 3; ++c) t.at(u, v, c) = base.at(x, y, c);
+                tm[static_cast<std::size_t>(v * w + u)] = mask[static_cast<std::size_t>(y * w + x)];
+            }
+        const reconstruct_report r = reconstruct(t.view(), image_view<float>(), tm.data(), o, s);
+        CHECK(r.phase1_rounds == r0.phase1_rounds);
+        CHECK(r.phase2_iterations == r0.phase2_iterations);
+        bool same = true;
+        for (int y = 0; y < w; ++y)
+            for (int x = 0; x < w; ++x) {
+                int u, v;
+                sym(k, w, x, y, u, v);
+                for (int c = 0; c < 3; ++c) same &= (t.at(u, v, c) == ref.at(x, y, c));
+            }
+        INFO("symmetry " << k);
+        CHECK(same);
+    }
+}
+
+TEST_CASE("clusters wider than the kernel stay within their neighbours' range", "[reconstruct]") {
+    const int w = 40, h = 30;
+    img col(w, h, 3), var(w, h, 3);
+    fill(col, 9);
+    fill(var, 10);
+    std::vector<std::uint8_t> mask(static_cast<std::size_t>(w * h), 0);
+    // a wide "highlight" disk whose every pixel is marked, radius 9 (kernel radius 2)
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+            if ((x - 20) * (x - 20) + (y - 15) * (y - 15) <= 81) {
+                mask[static_cast<std::size_t>(y * w + x)] = 1;
+                for (int c = 0; c < 3; ++c) {
+                    col.at(x, y, c) = std::numeric_limits<float>::quiet_NaN();
+                    var.at(x, y, c) = 1e30f;
+                }
+            }
+    float lo[3] = {1e30f, 1e30f, 1e30f}, hi[3] = {0, 0, 0};
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+            if (!mask[static_cast<std::size_t>(y * w + x)])
+                for (int c = 0; c < 3; ++c) {
+                    lo[c] = std::min(lo[c], col.at(x, y, c));
+                    hi[c] = std::max(hi[c], col.at(x, y, c));
+                }
+    reconstruct_scratch s;
+    const reconstruct_report r = reconstruct(col.view(), var.view(), mask.data(), {}, s);
+    REQUIRE(r.error.ok());
+    CHECK(r.phase1_rounds >= 4);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+            for (int c = 0; c < 3; ++c) {
+                CHECK(std::isfinite(col.at(x, y, c)));
+                CHECK(col.at(x, y, c) >= lo[c]);
+                CHECK(col.at(x, y, c) <= hi[c]);
+                CHECK(var.at(x, y, c) < 2.0f);  // variance rebuilt from neighbours too
+            }
+}
+
+TEST_CASE("borders, corners, 1x1 and nothing to read from", "[reconstruct]") {
+    reconstruct_scratch s;
+    img one(1, 1, 3);
+    one.at(0, 0, 0) = std::numeric_limits<float>::infinity();
+    one.at(0, 0, 1) = 5.0f;
+    std::uint8_t m1 = 1;
+    reconstruct_report r = reconstruct(one.view(), image_view<float>(), &m1, {}, s);
+    CHECK(r.error.code() == errc::no_valid_pixels);
+    CHECK(r.unreachable == 1);
+    CHECK(one.at(0, 0, 0) == 0.0f);  // nothing becomes or stays non-finite
+    CHECK(one.at(0, 0, 1) == 5.0f);
+
+    img all(4, 4, 1);
+    fill(all, 2);
+    all.at(1, 1, 0) = std::numeric_limits<float>::quiet_NaN();
+    std::vector<std::uint8_t> every(16, 1);
+    r = reconstruct(all.view(), image_view<float>(), every.data(), {}, s);
+    CHECK(r.error.code() == errc::no_valid_pixels);
+    for (float v : all.px) CHECK(std::isfinite(v));
+
+    img corner(5, 5, 1);
+    for (auto& v : corner.px) v = 3.0f;
+    corner.at(0, 0, 0) = 1e20f;
+    corner.at(4, 4, 0) = 1e20f;
+    std::vector<std::uint8_t> cm(25, 0);
+    cm[0] = cm[24] = 1;
+    r = reconstruct(corner.view(), image_view<float>(), cm.data(), {}, s);
+    CHECK(r.error.ok());
+    CHECK(corner.at(0, 0, 0) == 3.0f);
+    CHECK(corner.at(4, 4, 0) == 3.0f);
+
+    img none(3, 3, 1);
+    std::vector<std::uint8_t> nm(9, 0);
+    r = reconstruct(none.view(), image_view<float>(), nm.data(), {}, s);
+    CHECK(r.pixels == 0);
+}
+
+TEST_CASE("unmarked pixels are never changed, bit for bit", "[reconstruct]") {
+    img col(32, 20, 4), var(32, 20, 1);
+    fill(col, 4);
+    fill(var, 5);
+    col.at(3, 3, 1) = -0.0f;
+    const img col0 = col, var0 = var;
+    std::vector<std::uint8_t> mask(32 * 20, 0);
+    for (std::size_t i = 7; i < mask.size(); i += 37) mask[i] = 1;
+    reconstruct_scratch s;
+    (void)reconstruct(col.view(), var.view(), mask.data(), {}, s);
+    for (std::size_t i = 0; i < mask.size(); ++i) {
+        if (mask[i]) continue;
+        for (int c = 0; c < 4; ++c)
+            CHECK(std::memcmp(&col.px[i * 4 + static_cast<std::size_t>(c)], &col0.px[i * 4 + static_cast<std::size_t>(c)], 4) == 0);
+        CHECK(std::memcmp(&var.px[i], &var0.px[i], 4) == 0);
+    }
+}
+
+TEST_CASE("options are checked", "[reconstruct]") {
+    reconstruct_options o;
+    o.kernel_width = 4;
+    CHECK(check_reconstruct_options(o).code() == errc::invalid_argument);
+    o.kernel_width = 7;
+    o.sigma = 0;
+    CHECK(!check_reconstruct_options(o).ok());
+    o.sigma = 1.5;
+    CHECK(check_reconstruct_options(o).ok());
+    img im(3, 3, 1);
+    std::vector<std::uint8_t> m(9, 1);
+    reconstruct_scratch s;
+    o.kernel_width = 2;
+    CHECK(reconstruct(im.view(), image_view<float>(), m.data(), o, s).error.code() == errc::invalid_argument);
+}
+
+TEST_CASE("standard deviation: reductions, black, alpha, negative, non-finite", "[stddev]") {
+    const int w = 6, h = 1;
+    std::vector<float> col = {1, 1, 1, 0, 0, 0, 1, 2, 3, 1, 1, 1, 1, 1, 1, 1, 1, 1};
+    std::vector<float> var = {4, 4, 4, 1, 1, 1, 1, 4, 16, -1, 4, 4, 1, 1, std::numeric_limits<float>::quiet_NaN(), 9, 9, 9};
+    std::vector<float> alpha = {1, 1, 1, 1, 1, 0};
+    auto c = *make_image_view(static_cast<const float*>(col.data()), w, h, 3);
+    auto v = *make_image_view(static_cast<const float*>(var.data()), w, h, 3);
+    auto a = *make_image_view(static_cast<const float*>(alpha.data()), w, h, 1);
+    std::vector<float> sd(6);
+    std::vector<std::uint8_t> lab(6);
+    stddev_counts n = compute_stddev(c, v, a, variance_reduction::mean, sd.data(), lab.data());
+    CHECK(sd[0] == 2.0f);
+    CHECK(lab[1] == static_cast<std::uint8_t>(pixel_class::ignored));  // black
+    CHECK(sd[2] == Approx(std::sqrt(7.0)));
+    CHECK(sd[3] == Approx(std::sqrt(8.0 / 3.0)));  // -1 counts as 0
+    CHECK(lab[4] == static_cast<std::uint8_t>(pixel_class::nonfinite));
+    CHECK(std::isnan(sd[4]));
+    CHECK(lab[5] == static_cast<std::uint8_t>(pixel_class::ignored));  // alpha 0
+    CHECK(n.valid == 3);
+    CHECK(n.ignored == 2);
+    CHECK(n.nonfinite == 1);
+    CHECK(n.negative_variance == 1);
+    (void)compute_stddev(c, v, a, variance_reduction::max, sd.data(), lab.data());
+    CHECK(sd[2] == 4.0f);
+    (void)compute_stddev(c, v, a, variance_reduction::luminance, sd.data(), lab.data());
+    CHECK(sd[2] == Approx(std::sqrt(0.2126 + 0.7152 * 4 + 0.0722 * 16)));
+    CHECK(!check_half_views(c, *v.subview(0, 0, 5, 1), a).ok());
+    CHECK(check_half_views(c, *v.channel_range(0, 2), a).code() == errc::channel_mismatch);
+}
