@@ -3,7 +3,7 @@
 
 # Relative path conversion top directories.
 set(CMAKE_RELATIVE_PATH_TOP_SOURCE "/work/main")
-set(CMAKE_RELATIVE_PATH_TOP_BINARY "/work/main/build")
+set(CMAKE_RELATIVE_PATH_TOP_BINARY "/work/main/build/tests")
 
 # Force unix paths in dependencies.
 set(CMAKE_FORCE_UNIX_PATHS 1)

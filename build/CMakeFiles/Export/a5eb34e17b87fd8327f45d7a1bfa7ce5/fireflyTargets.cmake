@@ -60,6 +60,7 @@ add_library(firefly::firefly INTERFACE IMPORTED)
 
 set_target_properties(firefly::firefly PROPERTIES
   INTERFACE_COMPILE_FEATURES "cxx_std_17"
+  INTERFACE_INCLUDE_DIRECTORIES "${_IMPORT_PREFIX}/include"
 )
 
 if(CMAKE_VERSION VERSION_LESS 3.0.0)
