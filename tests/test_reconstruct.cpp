@@ -1,6 +1,7 @@
 #include <firefly/reconstruct.hpp>
 #include <firefly/stddev.hpp>
 
+#include <cfloat>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -241,4 +242,69 @@ TEST_CASE("standard deviation: reductions, black, alpha, negative, non-finite", 
     CHECK(sd[2] == Approx(std::sqrt(0.2126 + 0.7152 * 4 + 0.0722 * 16)));
     CHECK(!check_half_views(c, *v.subview(0, 0, 5, 1), a).ok());
     CHECK(check_half_views(c, *v.channel_range(0, 2), a).code() == errc::channel_mismatch);
+}
+
+TEST_CASE("standard deviation: every layout gives the same bits", "[stddev][invariant]") {
+    // Packed RGB (SIMD path), RGBA (4-channel path), planar (strided path), with and without
+    // alpha, on values that exercise every class: NaN, Inf, black, negative, FLT_MAX, denormal.
+    const int w = 37, h = 11;  // not a multiple of 4: SIMD tails too
+    const std::size_t n = static_cast<std::size_t>(w * h);
+    std::vector<float> rgb(n * 3), var(n * 3), alpha(n);
+    std::uint32_t s = 12345;
+    auto rnd = [&] {
+        s = s * 1664525u + 1013904223u;
+        return static_cast<float>(s >> 8) / 16777216.0f;
+    };
+    for (std::size_t i = 0; i < n; ++i) {
+        for (int c = 0; c < 3; ++c) {
+            rgb[i * 3 + c] = rnd();
+            var[i * 3 + c] = rnd() * rnd();
+        }
+        alpha[i] = rnd() < 0.2f ? 0.0f : rnd();
+        switch (i % 23) {
+            case 1: rgb[i * 3 + 1] = std::numeric_limits<float>::quiet_NaN(); break;
+            case 2: var[i * 3 + 2] = std::numeric_limits<float>::infinity(); break;
+            case 3: rgb[i * 3] = rgb[i * 3 + 1] = rgb[i * 3 + 2] = 0.0f; break;
+            case 4: var[i * 3 + 1] = -1e-7f; break;
+            case 5: var[i * 3] = var[i * 3 + 1] = var[i * 3 + 2] = FLT_MAX; break;
+            case 6: var[i * 3] = 1e-45f; break;
+            case 7: rgb[i * 3] = -0.0f; rgb[i * 3 + 1] = 0.0f; rgb[i * 3 + 2] = -0.0f; break;
+            case 8: alpha[i] = std::numeric_limits<float>::quiet_NaN(); break;
+            case 9: var[i * 3 + 1] = -0.0f; break;
+            default: break;
+        }
+    }
+    std::vector<float> rgba(n * 4), vara(n * 4), planar_c(n * 3), planar_v(n * 3);
+    for (std::size_t i = 0; i < n; ++i)
+        for (int c = 0; c < 3; ++c) {
+            rgba[i * 4 + c] = rgb[i * 3 + c];
+            vara[i * 4 + c] = var[i * 3 + c];
+            planar_c[c * n + i] = rgb[i * 3 + c];
+            planar_v[c * n + i] = var[i * 3 + c];
+        }
+    for (variance_reduction how : {variance_reduction::mean, variance_reduction::luminance, variance_reduction::max})
+        for (bool with_alpha : {false, true}) {
+            image_view<const float> a;
+            if (with_alpha) a = *make_image_view(static_cast<const float*>(alpha.data()), w, h, 1);
+            std::vector<float> sd1(n), sd2(n), sd3(n);
+            std::vector<std::uint8_t> l1(n), l2(n), l3(n);
+            const stddev_counts k1 = compute_stddev(*make_image_view(static_cast<const float*>(rgb.data()), w, h, 3),
+                                                    *make_image_view(static_cast<const float*>(var.data()), w, h, 3), a, how,
+                                                    sd1.data(), l1.data());
+            const auto cv = *make_image_view(static_cast<const float*>(rgba.data()), w, h, 4);
+            const auto vv = *make_image_view(static_cast<const float*>(vara.data()), w, h, 4);
+            const stddev_counts k2 = compute_stddev(*cv.channel_range(0, 3), *vv.channel_range(0, 3), a, how, sd2.data(), l2.data());
+            const stddev_counts k3 = compute_stddev(*make_planar_view(static_cast<const float*>(planar_c.data()), w, h, 3),
+                                                    *make_planar_view(static_cast<const float*>(planar_v.data()), w, h, 3), a,
+                                                    how, sd3.data(), l3.data());
+            INFO("reduction " << static_cast<int>(how) << " alpha " << with_alpha);
+            CHECK(std::memcmp(sd1.data(), sd2.data(), n * 4) == 0);
+            CHECK(std::memcmp(sd1.data(), sd3.data(), n * 4) == 0);
+            CHECK(l1 == l2);
+            CHECK(l1 == l3);
+            CHECK(k1.valid == k3.valid);
+            CHECK(k1.negative_variance == k2.negative_variance);
+            CHECK(k1.nonfinite == k3.nonfinite);
+            for (std::size_t i = 0; i < n; ++i) CHECK(!(sd1[i] > FLT_MAX));  // no overflow to Inf
+        }
 }

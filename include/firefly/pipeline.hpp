@@ -113,6 +113,7 @@ public:
         std::size_t n = cache_.bytes();
         for (const auto& h : halves_)
             n += h.sd.capacity() * sizeof(float) + h.label.capacity() +
+                 sd_histogram::buckets * sizeof(std::uint32_t) + h.select_f.capacity() * sizeof(float) +
                  h.select.capacity() * sizeof(double) + h.order.capacity() * sizeof(std::uint32_t) +
                  h.removed.capacity() * sizeof(double) + h.recon.bytes();
         return n;
@@ -161,7 +162,6 @@ public:
 
 private:
     // Label byte: pixel_class in the low two bits, then these flags.
-    static constexpr std::uint8_t candidate_bit = 4;
     static constexpr std::uint8_t outlier_bit = 8;
     static constexpr std::uint8_t highlight_bit = 16;
     static constexpr std::uint8_t fix_bit = 32;
@@ -170,7 +170,9 @@ private:
     struct half_state {
         std::vector<float> sd;
         std::vector<std::uint8_t> label;
-        std::vector<double> select;          // median / MAD selection scratch
+        sd_histogram hist;                   // of the valid standard deviations
+        std::vector<float> select_f;         // median selection scratch
+        std::vector<double> select;          // MAD selection scratch
         std::vector<std::uint32_t> order;    // ESD candidates, removal order
         std::vector<double> removed;         // their standard deviations
         summary rest;                        // summary of the valid pixels never removed
@@ -193,39 +195,85 @@ private:
         s.sd.resize(n);
         s.label.resize(n);
         const stddev_counts c =
-            compute_stddev(hb.color, hb.variance, hb.alpha, options_.reduction, s.sd.data(), s.label.data());
+            detail::stddev_pass(hb.color, hb.variance, hb.alpha, options_.reduction, s.sd.data(), s.label.data());
+        s.hist.build(s.sd.data(), n);
         r.pixels = n;
         r.valid = c.valid;
         r.ignored = c.ignored;
         r.nonfinite = c.nonfinite;
         r.negative_variance = c.negative_variance;
         s.valid = c.valid;
-        const float* sd = s.sd.data();
-        const std::uint8_t* label = s.label.data();
-        auto value = [sd](std::size_t i) { return static_cast<double>(sd[i]); };
-        auto valid = [label](std::size_t i) { return cls(label[i]) == valid_class; };
-        const bound_result b =
-            modified_zscore_bound_if(n, value, valid, options_.bound_threshold, s.select);
+        const float* sd = s.sd.data();  // valid: >= 0; ignored: -1; non-finite: NaN
+        // Modified Z-score bound (exact median and MAD; see bound.hpp for the definition).
+        bound_result b;
+        b.threshold = options_.bound_threshold;
+        b.n = c.valid;
+        if (c.valid > 0) {
+            b.median = s.hist.median(sd, n, s.select_f);
+            b.mad = s.hist.mad(sd, n, b.median, s.select);
+            if (b.mad > 0) {
+                b.scale = b.mad / modified_zscore_constant;
+            } else {
+                const double mean_ad = detail::blocked_sum(n, [&](std::size_t i) {
+                    return sd[i] >= 0 ? std::fabs(static_cast<double>(sd[i]) - b.median) : 0.0;
+                }) / static_cast<double>(c.valid);
+                b.mad_fallback = true;
+                b.scale = mean_ad_constant * mean_ad;
+            }
+        }
         r.median = b.median;
         r.mad = b.mad;
-        r.bound = b.count;
-        // The bound's candidates are exactly the top b.count values: no heap needed.
-        s.order.clear();
-        for (std::size_t i = 0; i < n; ++i)
-            if (valid(i) && b.above(value(i))) s.order.push_back(static_cast<std::uint32_t>(i));
+        // The bound's test as one float comparison: cut is the smallest float x with
+        // b.above(x), found exactly (above() is monotone in x).
+        float cut = HUGE_VALF;
+        if (b.scale > 0) {
+            const double guess = b.median + b.threshold * b.scale;
+            cut = guess < 3.4e38 ? static_cast<float>(guess) : HUGE_VALF;
+            while (cut > 0 && b.above(std::nextafter(cut, 0.0f))) cut = std::nextafter(cut, 0.0f);
+            while (std::isfinite(cut) && !b.above(cut)) cut = std::nextafter(cut, HUGE_VALF);
+        }
+        const double med = b.median;
+        detail::collect_at_least(sd, n, cut, s.order);
+        // Shifted sums of every other valid value, blocked, branch-free.
+        double s1 = 0, s2 = 0;
+        std::size_t rest_n = 0;
+        for (std::size_t blk = 0; blk < n; blk += detail::block_size) {
+            const std::size_t e = std::min(n, blk + detail::block_size);
+            double b1 = 0, b2 = 0;
+            std::size_t cnt = 0;
+            for (std::size_t i = blk; i < e; ++i) {
+                const float x = sd[i];
+                const bool in = (x >= 0.0f) & (x < cut);
+                const double d = in ? static_cast<double>(x) - med : 0.0;
+                b1 += d;
+                b2 += d * d;
+                cnt += in;
+            }
+            s1 += b1;
+            s2 += b2;
+            rest_n += cnt;
+        }
+        r.bound = s.order.size();
         std::sort(s.order.begin(), s.order.end(), [sd](std::uint32_t x, std::uint32_t y) {
             return sd[x] > sd[y] || (sd[x] == sd[y] && x < y);
         });
+        // At most n - 2 steps: candidates beyond that rejoin the rest.
         const std::size_t m = std::min(s.order.size(), s.valid >= 2 ? s.valid - 2 : 0);
+        for (std::size_t j = m; j < s.order.size(); ++j) {
+            const double d = static_cast<double>(sd[s.order[j]]) - med;
+            s1 += d;
+            s2 += d * d;
+            ++rest_n;
+        }
         s.order.resize(m);
         s.removed.resize(m);
-        for (std::size_t j = 0; j < m; ++j) {
-            s.removed[j] = value(s.order[j]);
-            s.label[s.order[j]] |= candidate_bit;
+        for (std::size_t j = 0; j < m; ++j) s.removed[j] = sd[s.order[j]];
+        s.rest = summary{};
+        if (rest_n > 0) {
+            s.rest.count = rest_n;
+            s.rest.mean = med + s1 / static_cast<double>(rest_n);
+            s.rest.m2 = std::max(0.0, s2 - s1 * s1 / static_cast<double>(rest_n));
         }
-        s.rest = summary_of(n, value, [label](std::size_t i) {
-            return cls(label[i]) == valid_class && !(label[i] & candidate_bit);
-        });
     }
 
     void decide(half_state& s, half_report& r) {
@@ -243,15 +291,18 @@ private:
     template <class T>
     void check_highlights(const half_buffer<T>& a, const half_buffer<T>& b, std::size_t n,
                           frame_report& rep) {
+        (void)n;
         std::uint8_t* lab[2] = {halves_[0].label.data(), halves_[1].label.data()};
+        // Outliers come from the two lists, not from a pass over the frame.
         std::vector<std::uint32_t>& pairs = pairs_;
         pairs.clear();
         bool single = false;
-        for (std::size_t i = 0; i < n; ++i) {
-            const bool oa = lab[0][i] & outlier_bit, ob = lab[1][i] & outlier_bit;
-            if (oa && ob) pairs.push_back(static_cast<std::uint32_t>(i));
-            single |= oa != ob;
+        for (std::size_t j = 0; j < rep.half[0].outliers; ++j) {
+            const std::uint32_t i = halves_[0].order[j];
+            if (lab[1][i] & outlier_bit) pairs.push_back(i);
+            else single = true;
         }
+        single |= rep.half[1].outliers > pairs.size();
         rep.both_outliers = pairs.size();
         const highlight_options& ho = options_.highlight;
         const bool check_single = single && ho.min_excess_z > 0;
@@ -297,17 +348,17 @@ private:
             }
         }
         if (!check_single) return;
-        for (std::size_t i = 0; i < n; ++i) {
-            const bool oa = lab[0][i] & outlier_bit, ob = lab[1][i] & outlier_bit;
-            if (oa == ob) continue;
-            const int h = oa ? 0 : 1;
+        for (int h = 0; h < 2; ++h)
+            for (std::size_t j = 0; j < rep.half[h].outliers; ++j) {
+            const std::uint32_t i = halves_[h].order[j];
+            if (lab[1 - h][i] & outlier_bit) continue;  // a pair, decided above
             if (cls(lab[1 - h][i]) == nonfinite_class) continue;  // nothing to compare with
-            const int x = static_cast<int>(i % static_cast<std::size_t>(w));
-            const int y = static_cast<int>(i / static_cast<std::size_t>(w));
+            const int x = static_cast<int>(i % static_cast<std::uint32_t>(w));
+            const int y = static_cast<int>(i / static_cast<std::uint32_t>(w));
             if (!exceeds_other_half(ho, mean_colour(hb[h]->color, x, y), mean_colour(hb[1 - h]->color, x, y),
                                     reduced_variance(hb[1 - h]->variance, x, y), calibration))
                 lab[h][i] |= consistent_bit;
-        }
+            }
     }
 
     template <class T>
@@ -315,15 +366,27 @@ private:
                 half_report& r) {
         const std::size_t n = s.label.size();
         std::uint8_t* label = s.label.data();
-        for (std::size_t i = 0; i < n; ++i) {
+        // Outliers: walk their list, not the frame.
+        std::size_t highlights = 0, consistent = 0, fireflies = 0;
+        for (std::size_t j = 0; j < r.outliers; ++j) {
+            const std::uint32_t i = s.order[j];
             const std::uint8_t l = label[i];
-            const bool firefly = (l & outlier_bit) && !(l & (highlight_bit | consistent_bit));
-            r.highlights += (l & highlight_bit) ? 1 : 0;
-            r.consistent += (l & consistent_bit) ? 1 : 0;
-            r.fireflies += firefly ? 1 : 0;
-            r.repaired += cls(l) == nonfinite_class ? 1 : 0;
-            if (firefly || cls(l) == nonfinite_class) label[i] = l | fix_bit;
+            if (l & highlight_bit) {
+                ++highlights;
+            } else if (l & consistent_bit) {
+                ++consistent;
+            } else {
+                ++fireflies;
+                label[i] = static_cast<std::uint8_t>(l | fix_bit);
+            }
         }
+        r.highlights = highlights;
+        r.consistent = consistent;
+        r.fireflies = fireflies;
+        r.repaired = r.nonfinite;
+        if (r.nonfinite > 0)  // a byte-wise loop that vectorizes
+            for (std::size_t i = 0; i < n; ++i)
+                label[i] = static_cast<std::uint8_t>(label[i] | (((label[i] & pixel_class_bits) == nonfinite_class) ? fix_bit : 0));
         if (options_.reconstruct) {
             const reconstruct_report rr =
                 reconstruct(hb.color, hb.variance, label, options_.reconstruction, s.recon, fix_bit);

@@ -13,14 +13,20 @@
 //            tolerance or an iteration cap is reached.
 //
 // Exact symmetry: the kernel's offsets fall into classes that the 8 flips/transposes of the
-// square permute among themselves with equal weights; each class is summed in sorted-value
-// order, so a flipped or transposed input gives a bit-identical (flipped) output.
+// square permute among themselves with equal weights. Each class is listed as opposite pairs
+// (m, -m) and summed as the tree ((P1 + P2) + (P3 + P4)) of pair sums P = v(m) + v(-m): every
+// flip or transpose only swaps operands of some + in that tree (the 180-degree turn fixes
+// each pair; the rest of the group permutes the pairs as the Klein four-group, which keeps
+// the pairing {P1, P2}, {P3, P4}), and + is commutative, so a flipped or transposed input
+// gives a bit-identical (flipped) output with no sorting.
 #pragma once
 
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
+#include <type_traits>
 #include <vector>
 
 #include "image_view.hpp"
@@ -114,16 +120,24 @@ reconstruct_report reconstruct(const image_view<C>& color, const image_view<V>& 
                 if (a == 0 && b == 0) continue;
                 reconstruct_scratch::kernel_class k{};
                 k.weight = std::exp(-(a * a + b * b) / (2.0 * o.sigma * o.sigma));
-                const int cand[8][2] = {{a, b}, {-a, b}, {a, -b}, {-a, -b},
-                                        {b, a}, {-b, a}, {b, -a}, {-b, -a}};
-                for (const auto& c : cand) {
-                    bool dup = false;
-                    for (int j = 0; j < k.count; ++j) dup |= (k.dx[j] == c[0] && k.dy[j] == c[1]);
-                    if (!dup) {
-                        k.dx[k.count] = c[0];
-                        k.dy[k.count] = c[1];
-                        ++k.count;
-                    }
+                // Opposite pairs, in the order the summation tree expects.
+                int list[8][2];
+                if (a == 0) {  // (0, b): the axis class
+                    const int l[4][2] = {{0, b}, {0, -b}, {b, 0}, {-b, 0}};
+                    std::copy(&l[0][0], &l[0][0] + 8, &list[0][0]);
+                    k.count = 4;
+                } else if (a == b) {  // the diagonal class
+                    const int l[4][2] = {{a, a}, {-a, -a}, {-a, a}, {a, -a}};
+                    std::copy(&l[0][0], &l[0][0] + 8, &list[0][0]);
+                    k.count = 4;
+                } else {
+                    const int l[8][2] = {{a, b}, {-a, -b}, {-a, b}, {a, -b}, {b, a}, {-b, -a}, {-b, a}, {b, -a}};
+                    std::copy(&l[0][0], &l[0][0] + 16, &list[0][0]);
+                    k.count = 8;
+                }
+                for (int j = 0; j < k.count; ++j) {
+                    k.dx[j] = list[j][0];
+                    k.dy[j] = list[j][1];
                 }
                 s.classes_.push_back(k);
             }
@@ -134,11 +148,25 @@ reconstruct_report reconstruct(const image_view<C>& color, const image_view<V>& 
     const std::size_t npix = color.pixel_count();
     s.state_.assign(npix, 0);
     s.list_.clear();
-    for (std::size_t i = 0; i < npix; ++i)
-        if (mask[i] & bits) {
-            s.state_[i] = 1;
-            s.list_.push_back(static_cast<std::uint32_t>(i));
+    {  // marked pixels are rare: test eight mask bytes at a time
+        const std::uint64_t wide = 0x0101010101010101ull * bits;
+        std::size_t i = 0;
+        for (; i + 8 <= npix; i += 8) {
+            std::uint64_t word;
+            std::memcpy(&word, mask + i, 8);
+            if (!(word & wide)) continue;
+            for (std::size_t k = i; k < i + 8; ++k)
+                if (mask[k] & bits) {
+                    s.state_[k] = 1;
+                    s.list_.push_back(static_cast<std::uint32_t>(k));
+                }
         }
+        for (; i < npix; ++i)
+            if (mask[i] & bits) {
+                s.state_[i] = 1;
+                s.list_.push_back(static_cast<std::uint32_t>(i));
+            }
+    }
     rep.pixels = s.list_.size();
     if (s.list_.empty()) return rep;
     s.staged_.assign(s.list_.size() * static_cast<std::size_t>(nch), 0.0);
@@ -153,56 +181,53 @@ reconstruct_report reconstruct(const image_view<C>& color, const image_view<V>& 
     };
 
     // Weighted mean of the readable neighbours of list entry e into staged; false when none.
-    // readable(state) says which neighbour states may be read. Within a kernel class the
-    // members are summed in the order of their sorted channel tuples: the same multiset of
-    // neighbours (as after a flip or transpose) gives the same sums, bit for bit.
+    // readable(state) says which neighbour states may be read; an unreadable or outside
+    // neighbour contributes 0 to its place in the summation tree (and nothing to the weight).
     constexpr int max_ch = 16;
-    auto filter = [&](std::size_t e, auto readable) -> bool {
+    // NC: the channel count when known at compile time (common counts), else 0 (runtime).
+    auto filter_n = [&](std::size_t e, auto readable, auto nc_const) -> bool {
+        constexpr int NC = decltype(nc_const)::value;
+        const int nchan = NC > 0 ? NC : nch;
         const std::size_t p = s.list_[e];
         const int x = static_cast<int>(p % static_cast<std::size_t>(w));
         const int y = static_cast<int>(p / static_cast<std::size_t>(w));
-        double vals[8][max_ch];
-        int order[8];
         double wsum = 0.0;
-        double* out = &s.staged_[e * static_cast<std::size_t>(nch)];
-        for (int c = 0; c < nch; ++c) out[c] = 0.0;
+        double acc[max_ch] = {};
+        double v[8][max_ch];
         for (const auto& k : s.classes_) {
-            int n = 0;
+            int used = 0;
             for (int j = 0; j < k.count; ++j) {
                 const int xx = x + k.dx[j], yy = y + k.dy[j];
-                if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
-                if (!readable(s.state_[static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) +
-                                       static_cast<std::size_t>(xx)]))
-                    continue;
-                for (int c = 0; c < nch; ++c) vals[n][c] = load(xx, yy, c);
-                order[n] = n;
-                ++n;
+                const bool ok = xx >= 0 && yy >= 0 && xx < w && yy < h &&
+                                readable(s.state_[static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) +
+                                                  static_cast<std::size_t>(xx)]);
+                used += ok;
+                for (int c = 0; c < nchan; ++c) v[j][c] = ok ? load(xx, yy, c) : 0.0;
             }
-            if (n == 0) continue;
-            wsum += k.weight * n;
-            // Insertion sort of at most 8 members by their channel tuple.
-            for (int i = 1; i < n; ++i) {
-                const int cur = order[i];
-                int j = i;
-                for (; j > 0; --j) {
-                    const double* a = vals[order[j - 1]];
-                    const double* b = vals[cur];
-                    int c = 0;
-                    while (c < nch && a[c] == b[c]) ++c;
-                    if (c == nch || !(a[c] > b[c])) break;
-                    order[j] = order[j - 1];
-                }
-                order[j] = cur;
-            }
-            for (int c = 0; c < nch; ++c) {
-                double sum = 0.0;
-                for (int j = 0; j < n; ++j) sum += vals[order[j]][c];
-                out[c] += k.weight * sum;
+            if (used == 0) continue;
+            wsum += k.weight * used;
+            if (k.count == 8) {
+                for (int c = 0; c < nchan; ++c)
+                    acc[c] += k.weight * (((v[0][c] + v[1][c]) + (v[2][c] + v[3][c])) +
+                                          ((v[4][c] + v[5][c]) + (v[6][c] + v[7][c])));
+            } else {
+                for (int c = 0; c < nchan; ++c) acc[c] += k.weight * ((v[0][c] + v[1][c]) + (v[2][c] + v[3][c]));
             }
         }
         if (!(wsum > 0)) return false;
-        for (int c = 0; c < nch; ++c) out[c] /= wsum;
+        double* out = &s.staged_[e * static_cast<std::size_t>(nch)];
+        for (int c = 0; c < nchan; ++c) out[c] = acc[c] / wsum;
         return true;
+    };
+    auto filter = [&](std::size_t e, auto readable) -> bool {
+        switch (nch) {
+            case 3: return filter_n(e, readable, std::integral_constant<int, 3>{});
+            case 4: return filter_n(e, readable, std::integral_constant<int, 4>{});
+            case 6: return filter_n(e, readable, std::integral_constant<int, 6>{});
+            case 7: return filter_n(e, readable, std::integral_constant<int, 7>{});
+            case 8: return filter_n(e, readable, std::integral_constant<int, 8>{});
+            default: return filter_n(e, readable, std::integral_constant<int, 0>{});
+        }
     };
     auto commit = [&](std::size_t e) -> double {  // write staged values, return rel. change
         const std::size_t p = s.list_[e];

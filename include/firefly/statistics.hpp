@@ -6,9 +6,13 @@
 //                     partition never depends on threads, so results are bit-reproducible)
 //   running_summary   Welford updates. add() is stable for any value; the detector only ever
 //                     ADDS values back (the largest last) and never subtracts one out.
-//   select_pair       exact k-th and (k+1)-th smallest of n non-negative keys by a 4096-bucket
-//                     histogram on the float bits, then nth_element inside one bucket:
-//                     two light passes instead of a full nth_element over a copy.
+//   select_pair       exact k-th and (k+1)-th smallest of n keys by a 4096-bucket histogram
+//                     on the float bits, then nth_element inside one bucket: two light
+//                     passes instead of a full nth_element over a copy.
+//   sd_histogram      the detector's fast path over an array of standard deviations (valid
+//                     values >= 0; others negative or NaN): a 65536-bucket histogram built
+//                     while the values are written, then the exact median in one more pass
+//                     and the exact MAD in one more (bracketed from the same histogram).
 #pragma once
 
 #include <algorithm>
@@ -18,6 +22,10 @@
 #include <cstdint>
 #include <cstring>
 #include <vector>
+
+#if defined(__SSE2__) || defined(_M_X64)
+#include <emmintrin.h>
+#endif
 
 namespace firefly {
 
@@ -66,6 +74,60 @@ private:
 namespace detail {
 
 inline constexpr std::size_t block_size = 1024;
+
+// Appends to out the indices i with v[i] >= cut (a few percent of the values at most): SSE2
+// tests four at a time and branches only on a match.
+inline void collect_at_least(const float* v, std::size_t n, float cut, std::vector<std::uint32_t>& out) {
+    out.clear();
+    std::size_t i = 0;
+#if defined(__SSE2__) || defined(_M_X64)
+    const __m128 c = _mm_set1_ps(cut);
+    for (; i + 4 <= n; i += 4) {
+        int m = _mm_movemask_ps(_mm_cmpge_ps(_mm_loadu_ps(v + i), c));
+        while (m) {
+            const int k = m & -m;
+            out.push_back(static_cast<std::uint32_t>(i + (k == 1 ? 0u : k == 2 ? 1u : k == 4 ? 2u : 3u)));
+            m ^= k;
+        }
+    }
+#endif
+    for (; i < n; ++i)
+        if (v[i] >= cut) out.push_back(static_cast<std::uint32_t>(i));
+}
+
+// Counts the v[i] in [in_lo, in_hi] and appends to out the v[i] in [lo, hi] outside it
+// (NaN and negatives never match when lo >= 0). Returns how many were appended; out needs room
+// for all of them. The matches are a few percent of the values: SSE2 tests four at a time and
+// branches only when one of them matches.
+inline std::size_t count_and_collect(const float* v, std::size_t n, float in_lo, float in_hi, float lo, float hi,
+                                     float* out, std::size_t& inner) noexcept {
+    std::size_t i = 0, j = 0, below = 0;
+#if defined(__SSE2__) || defined(_M_X64)
+    const __m128 vil = _mm_set1_ps(in_lo), vih = _mm_set1_ps(in_hi), vl = _mm_set1_ps(lo), vh = _mm_set1_ps(hi);
+    for (; i + 4 <= n; i += 4) {
+        const __m128 x = _mm_loadu_ps(v + i);
+        const __m128 in = _mm_and_ps(_mm_cmpge_ps(x, vil), _mm_cmple_ps(x, vih));
+        const __m128 band = _mm_andnot_ps(in, _mm_and_ps(_mm_cmpge_ps(x, vl), _mm_cmple_ps(x, vh)));
+        const int im = _mm_movemask_ps(in);
+        below += static_cast<std::size_t>((im & 1) + ((im >> 1) & 1) + ((im >> 2) & 1) + ((im >> 3) & 1));
+        int bm = _mm_movemask_ps(band);
+        while (bm) {
+            const int k = bm & -bm;
+            const int lane = k == 1 ? 0 : k == 2 ? 1 : k == 4 ? 2 : 3;
+            out[j++] = v[i + static_cast<std::size_t>(lane)];
+            bm ^= k;
+        }
+    }
+#endif
+    for (; i < n; ++i) {
+        const float x = v[i];
+        const bool in = (x >= in_lo) & (x <= in_hi);
+        below += in;
+        if (!in && x >= lo && x <= hi) out[j++] = x;
+    }
+    inner = below;
+    return j;
+}
 
 // Sum of f(i) for i in [0, n) in fixed blocks.
 template <class F>
@@ -173,5 +235,174 @@ bool median_of(std::size_t n, Key&& key, Keep&& keep, std::size_t count, double&
     median = (count % 2 == 1) ? a : 0.5 * a + 0.5 * b;
     return true;
 }
+
+// ---------------------------------------------------------------------------------------
+// Exact median and MAD of the non-negative entries of a float array, with a histogram of
+// the upper 16 bits of each value (1/128 of an octave per bucket) built by the caller.
+class sd_histogram {
+public:
+    static constexpr std::size_t buckets = 1u << 16;
+
+    // Histogram of the values >= 0 in v[0, n). Two interleaved tables, so runs of equal
+    // buckets (neighbouring pixels) do not serialise on one counter.
+    void build(const float* v, std::size_t n) {
+        hist_.assign(buckets, 0);  // assign keeps the capacity: no new pages after the first frame
+        spare_.assign(buckets, 0);
+        std::uint32_t* h0 = hist_.data();
+        std::uint32_t* h1 = spare_.data();
+        std::size_t i = 0, total = 0;
+        for (; i + 1 < n; i += 2) {
+            const float a = v[i], b = v[i + 1];
+            if (a >= 0) { ++h0[bucket(a)]; ++total; }
+            if (b >= 0) { ++h1[bucket(b)]; ++total; }
+        }
+        if (i < n && v[i] >= 0) { ++h0[bucket(v[i])]; ++total; }
+        for (std::size_t b = 0; b < buckets; ++b) h0[b] += h1[b];
+        total_ = total;
+    }
+    std::size_t total() const noexcept { return total_; }
+
+    static std::uint32_t bucket(float v) noexcept {
+        std::uint32_t bits;
+        std::memcpy(&bits, &v, sizeof bits);
+        return bits >> 16;
+    }
+    static float lower_edge(std::uint32_t b) noexcept {
+        const std::uint32_t bits = b << 16;
+        float f;
+        std::memcpy(&f, &bits, sizeof f);
+        return f;
+    }
+
+    // Exact median of the values >= 0 in v[0, n): one pass collecting the middle bucket(s).
+    double median(const float* v, std::size_t n, std::vector<float>& scratch) const {
+        if (total_ == 0) return 0.0;
+        const std::size_t k = (total_ - 1) / 2, k2 = total_ / 2;
+        std::size_t below = 0, b1 = 0;
+        while (below + hist_[b1] <= k) below += hist_[b1++];
+        std::size_t b2 = b1, upto = below + hist_[b1];
+        while (upto <= k2) upto += hist_[++b2];
+        // Buckets b1..b2 hold exactly the floats in [lower_edge(b1), lower_edge(b2 + 1)).
+        const float lo = lower_edge(static_cast<std::uint32_t>(b1));
+        const float hi = b2 + 1 < buckets ? lower_edge(static_cast<std::uint32_t>(b2 + 1)) : HUGE_VALF;
+        std::size_t count = 0;
+        for (std::size_t b = b1; b <= b2; ++b) count += hist_[b];
+        scratch.resize(count + 1);
+        std::size_t none = 0;  // [1, 0] is an empty inner interval
+        const float hi_incl = std::nextafter(hi, -HUGE_VALF);  // [lo, hi) as a closed interval
+        scratch.resize(detail::count_and_collect(v, n, 1.0f, 0.0f, lo, hi_incl, scratch.data(), none));
+        auto first = scratch.begin() + static_cast<std::ptrdiff_t>(k - below);
+        std::nth_element(scratch.begin(), first, scratch.end());
+        const double a = *first;
+        const double b = (k2 == k) ? a : static_cast<double>(*std::min_element(first + 1, scratch.end()));
+        return 0.5 * a + 0.5 * b;
+    }
+
+    // Exact MAD (median of |x - med|) of the values >= 0. The histogram brackets the answer
+    // in (d_lo, d_hi]; one pass counts the deviations <= d_lo and collects those inside.
+    double mad(const float* v, std::size_t n, double med, std::vector<double>& scratch) const {
+        if (total_ == 0) return 0.0;
+        const std::size_t k = (total_ - 1) / 2, k2 = total_ / 2;
+        std::vector<std::uint64_t>& prefix = prefix_;  // reused: a fresh 512 KiB block would fault in
+        prefix.resize(buckets + 1);
+        prefix[0] = 0;
+        for (std::size_t b = 0; b < buckets; ++b) prefix[b + 1] = prefix[b] + hist_[b];
+        std::size_t top = buckets;
+        while (top > 0 && hist_[top - 1] == 0) --top;
+        const double hi = top < buckets ? static_cast<double>(lower_edge(static_cast<std::uint32_t>(top))) : HUGE_VAL;
+        // Counts of values surely inside / possibly inside [med - d, med + d].
+        auto range = [&](double d, bool outer) -> std::uint64_t {
+            const double lo_v = std::max(med - d, 0.0), hi_v = med + d;
+            long bl = static_cast<long>(bucket(static_cast<float>(lo_v)));
+            long br = hi_v >= 3.0e38 ? static_cast<long>(buckets) - 1 : static_cast<long>(bucket(static_cast<float>(hi_v)));
+            if (outer) {
+                bl = std::max(bl - 1, 0L);
+                br = std::min(br + 1, static_cast<long>(buckets) - 1);
+                if (med - d <= 0) bl = 0;
+            } else {
+                bl = (med - d <= 0) ? 0 : bl + 1;
+                br = br - 1;
+            }
+            return br < bl ? 0 : prefix[static_cast<std::size_t>(br) + 1] - prefix[static_cast<std::size_t>(bl)];
+        };
+        const double dmax = std::isfinite(hi) ? std::max(med, hi - med) * 2.0 + 1.0 : HUGE_VAL;
+        // d_lo: largest d with outer count <= k (so the k-th deviation is above it).
+        double d_lo = -1.0;
+        if (range(0.0, true) <= k && std::isfinite(dmax)) {
+            double a = 0.0, b = dmax;
+            for (int it = 0; it < 80; ++it) {
+                const double m = 0.5 * (a + b);
+                if (range(m, true) <= k) a = m; else b = m;
+            }
+            d_lo = a;
+        }
+        // d_hi: smallest d with inner count >= k2 + 1.
+        double d_hi = HUGE_VAL;
+        if (std::isfinite(dmax) && range(dmax, false) >= k2 + 1) {
+            double a = std::max(d_lo, 0.0), b = dmax;
+            for (int it = 0; it < 80; ++it) {
+                const double m = 0.5 * (a + b);
+                if (range(m, false) >= k2 + 1) b = m; else a = m;
+            }
+            d_hi = b;
+        }
+        // In float terms: |x - med| <= d_lo exactly when x lies in [in_lo, in_hi] (the
+        // bounds rounded inwards), and every deviation in (d_lo, d_hi] has its x in
+        // [out_lo, out_hi] (rounded outwards). Values collected beyond d_hi rank above the
+        // answer and do no harm.
+        const double a_lo = med - d_lo, a_hi = med + d_lo, b_lo = med - d_hi, b_hi = med + d_hi;
+        auto up = [](double x) {  // smallest float >= x
+            if (!(x > -3.4e38)) return -HUGE_VALF;
+            if (!(x < 3.4e38)) return HUGE_VALF;
+            float f = static_cast<float>(x);
+            return static_cast<double>(f) < x ? std::nextafter(f, HUGE_VALF) : f;
+        };
+        auto down = [](double x) {  // largest float <= x
+            if (!(x > -3.4e38)) return -HUGE_VALF;
+            if (!(x < 3.4e38)) return HUGE_VALF;
+            float f = static_cast<float>(x);
+            return static_cast<double>(f) > x ? std::nextafter(f, -HUGE_VALF) : f;
+        };
+        const bool has_inner = d_lo >= 0;
+        const float in_lo = has_inner ? up(a_lo) : 1.0f, in_hi = has_inner ? down(a_hi) : 0.0f;
+        const float out_lo = std::max(down(b_lo), 0.0f), out_hi = up(b_hi);
+        // The band holds at most the values of the buckets its two intervals touch.
+        auto count_buckets = [&](float a, float b) -> std::size_t {
+            if (!(a <= b)) return 0;
+            const std::size_t ba = bucket(std::max(a, 0.0f)), bb = std::min<std::size_t>(bucket(b), buckets - 1);
+            return bb < ba ? 0 : static_cast<std::size_t>(prefix[bb + 1] - prefix[ba]);
+        };
+        const std::size_t cap = has_inner ? count_buckets(out_lo, in_lo) + count_buckets(in_hi, out_hi)
+                                          : count_buckets(out_lo, out_hi);
+        band_.resize(cap + 1);
+        float* out = band_.data();
+        std::size_t below = 0;
+        const std::size_t j = detail::count_and_collect(v, n, in_lo, in_hi, out_lo, out_hi, out, below);
+        scratch.resize(j);
+        for (std::size_t t = 0; t < j; ++t) scratch[t] = std::fabs(static_cast<double>(out[t]) - med);
+        if (below > k || below + scratch.size() < k2 + 1) {  // cannot happen; stay exact anyway
+            below = 0;
+            scratch.clear();
+            for (std::size_t i = 0; i < n; ++i)
+                if (v[i] >= 0) scratch.push_back(std::fabs(static_cast<double>(v[i]) - med));
+        }
+        auto first = scratch.begin() + static_cast<std::ptrdiff_t>(k - below);
+        std::nth_element(scratch.begin(), first, scratch.end());
+        const double a = *first;
+        const double b = (k2 == k) ? a : *std::min_element(first + 1, scratch.end());
+        return 0.5 * a + 0.5 * b;
+    }
+
+    std::size_t bytes() const noexcept {
+        return (hist_.capacity() + spare_.capacity()) * sizeof(std::uint32_t) + band_.capacity() * sizeof(float) +
+               prefix_.capacity() * sizeof(std::uint64_t);
+    }
+
+private:
+    std::vector<std::uint32_t> hist_, spare_;
+    mutable std::vector<float> band_;
+    mutable std::vector<std::uint64_t> prefix_;
+    std::size_t total_ = 0;
+};
 
 }  // namespace firefly

@@ -11,13 +11,26 @@
 //   nonfinite  NaN or Inf in colour, variance or alpha: an outlier outright, repaired by the
 //              reconstruction, and kept out of every statistic
 // Negative variance (a renderer's round-off) counts as 0.
+//
+// Speed: this pass reads every input byte, so it is written to vectorize. Packed float images
+// take a loop with compile-time channel counts and no branches; square roots are taken
+// afterwards four at a time (std::sqrt's errno path keeps compilers from vectorizing it).
 #pragma once
 
+#include <algorithm>
 #include <cfloat>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <limits>
+#include <type_traits>
+
+#if defined(__SSE2__) || defined(_M_X64)
+#include <emmintrin.h>
+#elif defined(__ARM_NEON) && defined(__aarch64__)
+#include <arm_neon.h>
+#endif
 
 #include "image_view.hpp"
 #include "status.hpp"
@@ -59,18 +72,16 @@ status check_half_views(const image_view<C>& color, const image_view<V>& varianc
 
 namespace detail {
 
+// Channel variances of one pixel reduced to one number, in double (for the few per-pixel
+// decisions of the half-buffer checks). Non-finite sets `nonfinite`; negative counts as 0.
 template <class V>
 inline double reduce_variance(const V* px, std::ptrdiff_t cstride, int channels,
                               variance_reduction how, bool& nonfinite, bool& negative) noexcept {
     using traits = channel_traits<std::remove_cv_t<V>>;
-    auto at = [&](int c) {
-        return traits::load(*reinterpret_cast<const V*>(reinterpret_cast<const unsigned char*>(px) +
-                                                        c * cstride));
-    };
     const int n = colour_channels(channels);
     double v[3] = {0, 0, 0};
     for (int c = 0; c < n; ++c) {
-        v[c] = at(c);
+        v[c] = traits::load(*reinterpret_cast<const V*>(reinterpret_cast<const unsigned char*>(px) + c * cstride));
         if (!std::isfinite(v[c])) nonfinite = true;
         if (v[c] < 0) {
             negative = true;
@@ -78,21 +89,379 @@ inline double reduce_variance(const V* px, std::ptrdiff_t cstride, int channels,
         }
     }
     if (n == 1) return v[0];
+    if (how == variance_reduction::max) return std::max(v[0], std::max(v[1], v[2]));
+    if (how == variance_reduction::luminance && n == 3) return 0.2126 * v[0] + 0.7152 * v[1] + 0.0722 * v[2];
+    return (v[0] + v[1] + v[2]) / n;
+}
+
+// Element (not byte) strides: every stride of a checked view is a multiple of its element
+// size, so the per-pixel loop indexes plain pointers.
+template <class T>
+struct strided {
+    T* p;
+    std::ptrdiff_t c, x, y;
+    explicit strided(const image_view<T>& v) noexcept
+        : p(v.data()),
+          c(v.channel_stride() / static_cast<std::ptrdiff_t>(sizeof(T))),
+          x(v.pixel_stride() / static_cast<std::ptrdiff_t>(sizeof(T))),
+          y(v.row_stride() / static_cast<std::ptrdiff_t>(sizeof(T))) {}
+};
+
+// Arithmetic of the standard deviation: float for float images (vectorizes, and float
+// precision is what the images carry), double otherwise. Every layout uses the same formula
+// in the same order, so an RGB view and an RGBA view of the same pixels give the same bits.
+template <class T>
+using sd_arith = std::conditional_t<std::is_same_v<std::remove_cv_t<T>, float>, float, double>;
+
+// One pixel, branch-free: its class, and its reduced variance (-1 ignored, NaN non-finite).
+// c, v: the first three colour / variance channels (unused ones 0); NC colour channels, NV
+// variance channels used (1 or NC); How: the reduction.
+template <variance_reduction How, int NC, int NV, bool HasAlpha, class R>
+inline R classify_pixel(const R (&c)[3], const R (&v)[3], R a, std::uint8_t& label, bool& negative) noexcept {
+    R fin = (c[0] - c[0]) + (c[1] - c[1]) + (c[2] - c[2]) + (v[0] - v[0]) + (v[1] - v[1]) + (v[2] - v[2]);
+    if (HasAlpha) fin += a - a;  // NaN for any NaN or Inf
+    const bool finite = fin == R(0);
+    bool black = c[0] == R(0);
+    if (NC > 1) black &= c[1] == R(0);
+    if (NC > 2) black &= c[2] == R(0);
+    const bool covered = !HasAlpha || a > R(0);
+    negative = (v[0] < R(0)) | (v[1] < R(0)) | (v[2] < R(0));
+    // max, not a branch: negative -> 0 (non-finite pixels are discarded anyway)
+    const R v0 = std::max(v[0], R(0)), v1 = std::max(v[1], R(0)), v2 = std::max(v[2], R(0));
+    R var;
+    if (NV == 1) var = v0;
+    else if (How == variance_reduction::max) var = std::max(v0, std::max(v1, v2));
+    else if (How == variance_reduction::luminance && NV == 3) var = R(0.2126) * v0 + R(0.7152) * v1 + R(0.0722) * v2;
+    else var = (v0 + v1 + v2) / R(NV);
+    const bool ignored = black | !covered;
+    label = static_cast<std::uint8_t>(finite ? (ignored ? 1 : 0) : 2);
+    return finite ? (ignored ? R(-1) : var) : std::numeric_limits<R>::quiet_NaN();
+}
+
+// The float version, on bit patterns: integer compares and selects, which compilers turn
+// into vector code under default floating-point flags (float compare-selects they do not).
+// Same results as the generic version for every float input.
+inline std::uint32_t float_bits(float f) noexcept {
+    std::uint32_t b;
+    std::memcpy(&b, &f, sizeof b);
+    return b;
+}
+inline float bits_float(std::uint32_t b) noexcept {
+    float f;
+    std::memcpy(&f, &b, sizeof f);
+    return f;
+}
+
+// The class of a pixel from what the pass stored: NaN non-finite, -1 ignored, else valid.
+inline std::uint8_t label_of(float stored) noexcept {
+    const std::uint32_t b = float_bits(stored);
+    return static_cast<std::uint8_t>(((b == 0x7fc00000u) << 1) | (b == 0xbf800000u));
+}
+
+template <variance_reduction How, int NC, int NV, bool HasAlpha>
+inline float classify_bits(float cf0, float cf1, float cf2, float vf0, float vf1, float vf2, float a,
+                           std::uint32_t& negative) noexcept {
+    constexpr std::uint32_t exp = 0x7f800000u, mag = 0x7fffffffu, sign = 0x80000000u;
+    const std::uint32_t c0 = float_bits(cf0), c1 = float_bits(cf1), c2 = float_bits(cf2);
+    const std::uint32_t v0b = float_bits(vf0), v1b = float_bits(vf1), v2b = float_bits(vf2);
+    const std::uint32_t ab = float_bits(a);
+    std::uint32_t nonfinite = ((c0 & exp) == exp) | ((c1 & exp) == exp) | ((c2 & exp) == exp) |
+                              ((v0b & exp) == exp) | ((v1b & exp) == exp) | ((v2b & exp) == exp);
+    if (HasAlpha) nonfinite |= (ab & exp) == exp;
+    std::uint32_t any_colour = c0 & mag;
+    if (NC > 1) any_colour |= c1 & mag;
+    if (NC > 2) any_colour |= c2 & mag;
+    const std::uint32_t black = any_colour == 0;
+    const std::uint32_t covered = HasAlpha ? ((ab & sign) == 0) & ((ab & mag) != 0) : 1u;
+    // negative: sign set and not zero; such channels count as 0. Masks, not selects.
+    auto neg = [](std::uint32_t b) -> std::uint32_t { return (b >> 31) & static_cast<std::uint32_t>((b & 0x7fffffffu) != 0); };
+    const std::uint32_t n0 = neg(v0b), n1 = neg(v1b), n2 = neg(v2b);
+    negative = n0 | n1 | n2;
+    const float v0 = bits_float(v0b & mag & (n0 - 1u));  // n = 1 -> mask 0 -> +0
+    const float v1 = bits_float(v1b & mag & (n1 - 1u));
+    const float v2 = bits_float(v2b & mag & (n2 - 1u));
+    float var;
+    if (NV == 1) var = v0;
+    else if (How == variance_reduction::max) var = std::max(v0, std::max(v1, v2));
+    else if (How == variance_reduction::luminance && NV == 3) var = 0.2126f * v0 + 0.7152f * v1 + 0.0722f * v2;
+    else var = v0 / float(NV) + v1 / float(NV) + v2 / float(NV);  // no overflow at FLT_MAX
+    const std::uint32_t ignored = black | (covered ^ 1u);
+    const std::uint32_t nf_mask = 0u - nonfinite, ig_mask = 0u - ignored;
+    const std::uint32_t out = (nf_mask & 0x7fc00000u) |                       // NaN
+                              (~nf_mask & ((ig_mask & 0xbf800000u) |           // -1
+                                           (~ig_mask & float_bits(var))));     // variance
+    return bits_float(out);
+}
+
+template <variance_reduction How, int NC, int NV, bool HasAlpha>
+inline float classify_pixel(const float (&c)[3], const float (&v)[3], float a, std::uint8_t& label,
+                            bool& negative) noexcept {
+    std::uint32_t neg = 0;
+    const float r = classify_bits<How, NC, NV, HasAlpha>(c[0], c[1], c[2], v[0], v[1], v[2], a, neg);
+    negative = neg != 0;
+    label = label_of(r);
+    return r;
+}
+
+template <int NC, int NV, bool HasAlpha, class R>
+inline R classify_pixel(variance_reduction how, const R (&c)[3], const R (&v)[3], R a, std::uint8_t& label,
+                        bool& negative) noexcept {
     switch (how) {
-        case variance_reduction::max: {
-            double m = n > 0 ? v[0] : 0.0;
-            for (int c = 1; c < n; ++c) m = v[c] > m ? v[c] : m;
-            return m;
-        }
+        case variance_reduction::max:
+            return classify_pixel<variance_reduction::max, NC, NV, HasAlpha>(c, v, a, label, negative);
         case variance_reduction::luminance:
-            if (n == 3) return 0.2126 * v[0] + 0.7152 * v[1] + 0.0722 * v[2];
-            [[fallthrough]];
-        default: {
-            double s = 0;
-            for (int c = 0; c < n; ++c) s += v[c];
-            return s / n;
+            return classify_pixel<variance_reduction::luminance, NC, NV, HasAlpha>(c, v, a, label, negative);
+        default: return classify_pixel<variance_reduction::mean, NC, NV, HasAlpha>(c, v, a, label, negative);
+    }
+}
+
+// What the pass stores for one pixel: with float arithmetic the variance (square roots come
+// afterwards, four at a time); with double the standard deviation, clamped to FLT_MAX.
+template <class R>
+inline float store_value(R value) noexcept {
+    if constexpr (std::is_same_v<R, float>) {
+        return value;
+    } else {
+        if (!(value >= 0)) return static_cast<float>(value);
+        const double s = std::sqrt(value);
+        return s < static_cast<double>(FLT_MAX) ? static_cast<float>(s) : FLT_MAX;
+    }
+}
+
+// sd[i] = sqrt(sd[i]) for the entries >= 0; -1 and NaN stay. IEEE square roots are correctly
+// rounded, so the SIMD lanes equal std::sqrt bit for bit.
+inline void sqrt_nonnegative(float* sd, std::size_t n) noexcept {
+    std::size_t i = 0;
+#if defined(__SSE2__) || defined(_M_X64)
+    const __m128 zero = _mm_setzero_ps();
+    for (; i + 4 <= n; i += 4) {
+        const __m128 x = _mm_loadu_ps(sd + i);
+        const __m128 keep = _mm_cmpge_ps(x, zero);  // false for -1 and NaN
+        const __m128 r = _mm_sqrt_ps(_mm_and_ps(x, keep));
+        _mm_storeu_ps(sd + i, _mm_or_ps(_mm_and_ps(keep, r), _mm_andnot_ps(keep, x)));
+    }
+#elif defined(__ARM_NEON) && defined(__aarch64__)
+    for (; i + 4 <= n; i += 4) {
+        const float32x4_t x = vld1q_f32(sd + i);
+        const uint32x4_t keep = vcgeq_f32(x, vdupq_n_f32(0.0f));
+        vst1q_f32(sd + i, vbslq_f32(keep, vsqrtq_f32(vmaxq_f32(x, vdupq_n_f32(0.0f))), x));
+    }
+#endif
+    for (; i < n; ++i)
+        if (sd[i] >= 0) sd[i] = std::sqrt(sd[i]);
+}
+
+#if defined(__SSE2__) || defined(_M_X64)
+// The common case by hand: packed RGB float colour and variance, the mean reduction, four
+// pixels at a time, finishing the pass (square root, label) in the same loop. The same
+// operations as classify_bits in the same order, so the same bits. Returns the pixels done
+// (a multiple of 4; the caller finishes the rest) and counts negative-variance pixels.
+template <bool HasAlpha>
+std::size_t stddev_rgb_mean_sse2(const float* col, const float* var, const float* alpha, std::size_t n, float* sd,
+                                 std::uint8_t* label, std::size_t& negative_n) noexcept {
+    const __m128i exp = _mm_set1_epi32(0x7f800000), mag = _mm_set1_epi32(0x7fffffff);
+    const __m128i zero_i = _mm_setzero_si128();
+    const __m128 three = _mm_set1_ps(3.0f), minus_one = _mm_set1_ps(-1.0f);
+    const __m128 qnan = _mm_castsi128_ps(_mm_set1_epi32(0x7fc00000));
+    // De-interleave 4 RGB pixels: A = r0 g0 b0 r1, B = g1 b1 r2 g2, C = b2 r3 g3 b3.
+    auto split = [](const float* p, __m128& r, __m128& g, __m128& b) {
+        const __m128 A = _mm_loadu_ps(p), B = _mm_loadu_ps(p + 4), C = _mm_loadu_ps(p + 8);
+        r = _mm_shuffle_ps(A, _mm_shuffle_ps(B, C, _MM_SHUFFLE(1, 1, 2, 2)), _MM_SHUFFLE(2, 0, 3, 0));
+        g = _mm_shuffle_ps(_mm_shuffle_ps(A, B, _MM_SHUFFLE(0, 0, 1, 1)), _mm_shuffle_ps(B, C, _MM_SHUFFLE(2, 2, 3, 3)),
+                           _MM_SHUFFLE(2, 0, 2, 0));
+        b = _mm_shuffle_ps(_mm_shuffle_ps(A, B, _MM_SHUFFLE(1, 1, 2, 2)), _mm_shuffle_ps(C, C, _MM_SHUFFLE(3, 3, 0, 0)),
+                           _MM_SHUFFLE(2, 0, 2, 0));
+    };
+    auto is_exp = [&](__m128 x) { return _mm_cmpeq_epi32(_mm_and_si128(_mm_castps_si128(x), exp), exp); };
+    std::size_t i = 0, neg = 0;
+    for (; i + 4 <= n; i += 4) {
+        __m128 c0, c1, c2, v0, v1, v2;
+        split(col + 3 * i, c0, c1, c2);
+        split(var + 3 * i, v0, v1, v2);
+        __m128i nonfinite = _mm_or_si128(_mm_or_si128(is_exp(c0), is_exp(c1)), _mm_or_si128(is_exp(c2), is_exp(v0)));
+        nonfinite = _mm_or_si128(nonfinite, _mm_or_si128(is_exp(v1), is_exp(v2)));
+        __m128i covered = _mm_set1_epi32(-1);
+        if (HasAlpha) {
+            const __m128 a = _mm_loadu_ps(alpha + i);
+            nonfinite = _mm_or_si128(nonfinite, is_exp(a));
+            const __m128i ab = _mm_castps_si128(a);
+            // sign clear and not zero: as an int32, > 0
+            covered = _mm_cmpgt_epi32(ab, zero_i);
+        }
+        const __m128i any = _mm_and_si128(
+            _mm_or_si128(_mm_or_si128(_mm_castps_si128(c0), _mm_castps_si128(c1)), _mm_castps_si128(c2)), mag);
+        const __m128i black = _mm_cmpeq_epi32(any, zero_i);
+        // negative: sign set and not zero (as an int32: < 0 and not the bit pattern of -0)
+        auto negative = [&](__m128 x) {
+            const __m128i b = _mm_castps_si128(x);
+            return _mm_andnot_si128(_mm_cmpeq_epi32(_mm_and_si128(b, mag), zero_i), _mm_cmplt_epi32(b, zero_i));
+        };
+        const __m128i n0 = negative(v0), n1 = negative(v1), n2 = negative(v2);
+        const int nm = _mm_movemask_ps(_mm_castsi128_ps(_mm_or_si128(_mm_or_si128(n0, n1), n2)));
+        neg += static_cast<std::size_t>((nm & 1) + ((nm >> 1) & 1) + ((nm >> 2) & 1) + ((nm >> 3) & 1));
+        auto clamp = [&](__m128 x, __m128i nx) {
+            return _mm_castsi128_ps(_mm_andnot_si128(nx, _mm_and_si128(_mm_castps_si128(x), mag)));
+        };
+        const __m128 vm = _mm_add_ps(_mm_add_ps(_mm_div_ps(clamp(v0, n0), three), _mm_div_ps(clamp(v1, n1), three)),
+                                     _mm_div_ps(clamp(v2, n2), three));
+        const __m128i ignored = _mm_or_si128(black, _mm_xor_si128(covered, _mm_set1_epi32(-1)));
+        const __m128 ig = _mm_castsi128_ps(ignored), nf = _mm_castsi128_ps(nonfinite);
+        const __m128 root = _mm_sqrt_ps(vm);
+        __m128 out = _mm_or_ps(_mm_and_ps(ig, minus_one), _mm_andnot_ps(ig, root));
+        out = _mm_or_ps(_mm_and_ps(nf, qnan), _mm_andnot_ps(nf, out));
+        _mm_storeu_ps(sd + i, out);
+        // label: 2 non-finite, else 1 ignored, else 0
+        const __m128i lab = _mm_or_si128(_mm_and_si128(nonfinite, _mm_set1_epi32(2)),
+                                         _mm_andnot_si128(nonfinite, _mm_and_si128(ignored, _mm_set1_epi32(1))));
+        const __m128i bytes = _mm_packus_epi16(_mm_packs_epi32(lab, zero_i), zero_i);
+        const int word = _mm_cvtsi128_si32(bytes);
+        std::memcpy(label + i, &word, 4);
+    }
+    negative_n += neg;
+    return i;
+}
+#endif
+
+// Packed float images: plain arrays, channel counts known at compile time.
+template <variance_reduction How, int CS, int VS, bool HasAlpha>
+std::size_t stddev_packed(const float* col, const float* var, const float* alpha, std::size_t n, float* sd) noexcept {
+    constexpr int nc = CS < 3 ? CS : 3;
+    constexpr int nv = VS == 1 ? 1 : nc;
+    std::uint32_t negative_n = 0;  // per-pixel 0/1 summed: fits unless n >= 2^32 (refused upstream)
+    for (std::size_t i = 0; i < n; ++i) {
+        const float* cp = col + i * CS;
+        const float* vp = var + i * VS;
+        const float c1 = nc > 1 ? cp[1] : 0.0f, c2 = nc > 2 ? cp[2] : 0.0f;
+        const float v1 = nv > 1 ? vp[1] : 0.0f, v2 = nv > 2 ? vp[2] : 0.0f;
+        std::uint32_t negative;
+        sd[i] = classify_bits<How, nc, nv, HasAlpha>(cp[0], c1, c2, vp[0], v1, v2, HasAlpha ? alpha[i] : 1.0f,
+                                                     negative);
+        negative_n += negative;
+    }
+    return negative_n;
+}
+
+template <int CS, int VS>
+std::size_t stddev_packed(const float* col, const float* var, const float* alpha, std::size_t n,
+                          variance_reduction how, float* sd) noexcept {
+    using vr = variance_reduction;
+    if (alpha) {
+        return how == vr::max         ? stddev_packed<vr::max, CS, VS, true>(col, var, alpha, n, sd)
+               : how == vr::luminance ? stddev_packed<vr::luminance, CS, VS, true>(col, var, alpha, n, sd)
+                                      : stddev_packed<vr::mean, CS, VS, true>(col, var, alpha, n, sd);
+    }
+    return how == vr::max         ? stddev_packed<vr::max, CS, VS, false>(col, var, alpha, n, sd)
+           : how == vr::luminance ? stddev_packed<vr::luminance, CS, VS, false>(col, var, alpha, n, sd)
+                                  : stddev_packed<vr::mean, CS, VS, false>(col, var, alpha, n, sd);
+}
+
+// The pass over any layout.
+template <class C, class V, class A>
+stddev_counts stddev_pass(const image_view<C>& color, const image_view<V>& variance, const image_view<A>& alpha,
+                          variance_reduction how, float* sd, std::uint8_t* label) noexcept {
+    using R = sd_arith<C>;
+    using ct = channel_traits<std::remove_cv_t<C>>;
+    using vt = channel_traits<std::remove_cv_t<V>>;
+    using at = channel_traits<std::remove_cv_t<A>>;
+    stddev_counts counts;
+    const int w = color.width(), h = color.height();
+    const int nc = colour_channels(color.channels());
+    const int nv = variance.channels() == 1 ? 1 : nc;
+    const bool has_alpha = !alpha.empty();
+    const std::size_t n = color.pixel_count();
+    std::size_t negative_n = 0;
+    bool done = false;
+    if constexpr (std::is_same_v<std::remove_cv_t<C>, float> && std::is_same_v<std::remove_cv_t<V>, float> &&
+                  std::is_same_v<std::remove_cv_t<A>, float>) {
+        const bool packed = color.is_packed() && variance.is_packed() && (!has_alpha || alpha.is_packed());
+        const int cc = color.channels(), vc = variance.channels();
+        const float* ap = has_alpha ? alpha.data() : nullptr;
+        done = packed;
+#if defined(__SSE2__) || defined(_M_X64)
+        if (packed && cc == 3 && vc == 3 && how == variance_reduction::mean) {
+            // Whole pass (root and labels included) by hand; the tail by the generic kernel.
+            const std::size_t head = ap ? stddev_rgb_mean_sse2<true>(color.data(), variance.data(), ap, n, sd, label, negative_n)
+                                        : stddev_rgb_mean_sse2<false>(color.data(), variance.data(), ap, n, sd, label, negative_n);
+            negative_n += stddev_packed<3, 3>(color.data() + 3 * head, variance.data() + 3 * head, ap ? ap + head : nullptr,
+                                              n - head, how, sd + head);
+            for (std::size_t i = head; i < n; ++i) label[i] = label_of(sd[i]);
+            sqrt_nonnegative(sd + head, n - head);
+            std::size_t nf = 0, ig = 0;
+            for (std::size_t i = 0; i < n; ++i) {
+                nf += label[i] >> 1;
+                ig += label[i] & 1u;
+            }
+            counts.valid = n - nf - ig;
+            counts.ignored = ig;
+            counts.nonfinite = nf;
+            counts.negative_variance = negative_n;
+            return counts;
+        }
+#endif
+        if (packed && cc == 3 && vc == 3) negative_n = stddev_packed<3, 3>(color.data(), variance.data(), ap, n, how, sd);
+        else if (packed && cc == 3 && vc == 1) negative_n = stddev_packed<3, 1>(color.data(), variance.data(), ap, n, how, sd);
+        else if (packed && cc == 4 && vc == 4) negative_n = stddev_packed<4, 4>(color.data(), variance.data(), ap, n, how, sd);
+        else if (packed && cc == 4 && vc == 1) negative_n = stddev_packed<4, 1>(color.data(), variance.data(), ap, n, how, sd);
+        else done = false;
+    }
+    if (!done) {
+        const strided<C> cs(color);
+        const strided<V> vs(variance);
+        const strided<A> as(alpha);
+        using I1 = std::integral_constant<int, 1>;
+        using I2 = std::integral_constant<int, 2>;
+        using I3 = std::integral_constant<int, 3>;
+        for (int y = 0; y < h; ++y) {
+            const C* crow = cs.p + y * cs.y;
+            const V* vrow = vs.p + y * vs.y;
+            const A* arow = has_alpha ? as.p + y * as.y : nullptr;
+            const std::size_t base = static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
+            for (int x = 0; x < w; ++x) {
+                const C* cp = crow + x * cs.x;
+                const V* vp = vrow + x * vs.x;
+                R c[3] = {0, 0, 0}, v[3] = {0, 0, 0};
+                for (int k = 0; k < nc; ++k) c[k] = static_cast<R>(ct::load(cp[k * cs.c]));
+                for (int k = 0; k < nv; ++k) v[k] = static_cast<R>(vt::load(vp[k * vs.c]));
+                const R a = has_alpha ? static_cast<R>(at::load(arow[x * as.x])) : R(1);
+                bool negative = false;
+                std::uint8_t& l = label[base + static_cast<std::size_t>(x)];
+                // The channel counts become template arguments: the same formula as packed.
+                auto run = [&](auto nc_c, auto nv_c) {
+                    constexpr int NC = decltype(nc_c)::value, NV = decltype(nv_c)::value;
+                    return has_alpha ? classify_pixel<NC, NV, true>(how, c, v, a, l, negative)
+                                     : classify_pixel<NC, NV, false>(how, c, v, a, l, negative);
+                };
+                R value;
+                if (nc == 3) value = nv == 1 ? run(I3{}, I1{}) : run(I3{}, I3{});
+                else if (nc == 2) value = nv == 1 ? run(I2{}, I1{}) : run(I2{}, I2{});
+                else value = run(I1{}, I1{});
+                sd[base + static_cast<std::size_t>(x)] = store_value(value);
+                negative_n += negative;
+            }
         }
     }
+    std::size_t cls_count[3] = {0, 0, 0};
+    if constexpr (std::is_same_v<R, float>) {
+        // Labels follow from the stored values; then the square roots.
+        std::size_t nf = 0, ig = 0;
+        for (std::size_t i = 0; i < n; ++i) {
+            const std::uint8_t l = label_of(sd[i]);
+            label[i] = l;
+            nf += l >> 1;
+            ig += l & 1u;
+        }
+        cls_count[0] = n - nf - ig;
+        cls_count[1] = ig;
+        cls_count[2] = nf;
+        sqrt_nonnegative(sd, n);
+    } else {
+        for (std::size_t i = 0; i < n; ++i) ++cls_count[label[i] & 3];
+    }
+    counts.valid = cls_count[0];
+    counts.ignored = cls_count[1];
+    counts.nonfinite = cls_count[2];
+    counts.negative_variance = negative_n;
+    return counts;
 }
 
 }  // namespace detail
@@ -104,48 +473,7 @@ template <class C, class V, class A>
 stddev_counts compute_stddev(const image_view<C>& color, const image_view<V>& variance,
                              const image_view<A>& alpha, variance_reduction how, float* sd,
                              std::uint8_t* label) noexcept {
-    using ct = channel_traits<std::remove_cv_t<C>>;
-    using at = channel_traits<std::remove_cv_t<A>>;
-    stddev_counts counts;
-    const int w = color.width(), h = color.height();
-    const int nc = colour_channels(color.channels());
-    const bool has_alpha = !alpha.empty();
-    for (int y = 0; y < h; ++y) {
-        for (int x = 0; x < w; ++x) {
-            const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) +
-                                  static_cast<std::size_t>(x);
-            bool nonfinite = false, negative = false, black = true;
-            for (int c = 0; c < nc; ++c) {
-                const double v = ct::load(color(x, y, c));
-                if (!std::isfinite(v)) nonfinite = true;
-                if (v != 0) black = false;
-            }
-            const double var = detail::reduce_variance(&variance(x, y, 0), variance.channel_stride(),
-                                                       variance.channels(), how, nonfinite, negative);
-            bool covered = true;
-            if (has_alpha) {
-                const double a = at::load(alpha(x, y, 0));
-                if (!std::isfinite(a)) nonfinite = true;
-                covered = a > 0;
-            }
-            counts.negative_variance += negative ? 1 : 0;
-            if (nonfinite) {
-                label[i] = static_cast<std::uint8_t>(pixel_class::nonfinite);
-                sd[i] = std::numeric_limits<float>::quiet_NaN();
-                ++counts.nonfinite;
-            } else if (black || !covered) {
-                label[i] = static_cast<std::uint8_t>(pixel_class::ignored);
-                sd[i] = -1.0f;
-                ++counts.ignored;
-            } else {
-                label[i] = static_cast<std::uint8_t>(pixel_class::valid);
-                const double s = std::sqrt(var);
-                sd[i] = s < static_cast<double>(FLT_MAX) ? static_cast<float>(s) : FLT_MAX;
-                ++counts.valid;
-            }
-        }
-    }
-    return counts;
+    return detail::stddev_pass(color, variance, alpha, how, sd, label);
 }
 
 }  // namespace firefly
