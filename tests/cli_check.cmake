@@ -1,0 +1,98 @@
+# Command-line checks of `firefly`: a good run (single frame and a sequence) and every bad
+# input the tool promises to survive: one clear message, a non-zero exit, no output left.
+cmake_minimum_required(VERSION 3.16)
+file(REMOVE_RECURSE "${WORK}")
+file(MAKE_DIRECTORY "${WORK}")
+set(A "${DATA}/half_a.exr")
+set(B "${DATA}/half_b.exr")
+
+function(expect_ok name)
+  execute_process(COMMAND ${FIREFLY} ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "${name}: expected success, got ${rc}\n${out}\n${err}")
+  endif()
+  message(STATUS "${name}: ok: ${out}")
+endfunction()
+
+# expect_fail(name "message fragment" output-that-must-not-exist args...)
+function(expect_fail name fragment output)
+  file(REMOVE "${output}" "${output}.tmp")
+  execute_process(COMMAND ${FIREFLY} ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(rc EQUAL 0)
+    message(FATAL_ERROR "${name}: expected failure, got success\n${out}")
+  endif()
+  string(FIND "${err}" "${fragment}" pos)
+  if(pos EQUAL -1)
+    message(FATAL_ERROR "${name}: message lacks '${fragment}':\n${err}")
+  endif()
+  string(REGEX MATCHALL "\n" lines "${err}")
+  list(LENGTH lines nlines)
+  if(nlines GREATER 1)
+    message(FATAL_ERROR "${name}: more than one line of complaint:\n${err}")
+  endif()
+  if(EXISTS "${output}" OR EXISTS "${output}.tmp")
+    message(FATAL_ERROR "${name}: left an output behind")
+  endif()
+  message(STATUS "${name}: refused as expected: ${err}")
+endfunction()
+
+# --- good runs ------------------------------------------------------------------------------
+expect_ok(single ${A} ${B} -o ${WORK}/clean.exr --report ${WORK}/report.json --masks ${WORK}/mask --halves ${WORK}/half)
+foreach(f clean.exr report.json mask_a.exr mask_b.exr half_a.exr half_b.exr)
+  if(NOT EXISTS "${WORK}/${f}")
+    message(FATAL_ERROR "single: ${f} not written")
+  endif()
+endforeach()
+file(READ "${WORK}/report.json" json)
+string(JSON fireflies GET "${json}" frames 0 a fireflies)
+string(JSON iters GET "${json}" options iterations)
+if(fireflies LESS 1 OR NOT iters EQUAL 20)
+  message(FATAL_ERROR "report: fireflies ${fireflies}, iterations ${iters}")
+endif()
+expect_ok(help --help)
+expect_ok(pfm ${DATA}/a_color.pfm ${DATA}/b_color.pfm --variance-a ${DATA}/a_variance.pfm
+          --variance-b ${DATA}/b_variance.pfm -o ${WORK}/from_pfm.exr -q)
+# a frame sequence: frames 7 and 8
+foreach(f 0007 0008)
+  configure_file(${A} ${WORK}/seq_a.${f}.exr COPYONLY)
+  configure_file(${B} ${WORK}/seq_b.${f}.exr COPYONLY)
+endforeach()
+expect_ok(sequence "${WORK}/seq_a.####.exr" "${WORK}/seq_b.####.exr" --frames 7-8 -o "${WORK}/seq_clean.####.exr"
+          --report ${WORK}/seq.json --threads 2)
+foreach(f 0007 0008)
+  if(NOT EXISTS "${WORK}/seq_clean.${f}.exr")
+    message(FATAL_ERROR "sequence: frame ${f} not written")
+  endif()
+endforeach()
+file(READ "${WORK}/seq.json" json)
+string(JSON second_lambdas GET "${json}" frames 1 lambdas_computed)
+if(NOT second_lambdas EQUAL 0)
+  message(FATAL_ERROR "sequence: the second frame recomputed ${second_lambdas} lambdas (cache not reused)")
+endif()
+
+# --- bad input ------------------------------------------------------------------------------
+set(O ${WORK}/bad.exr)
+execute_process(COMMAND ${MAKE_NAN} ${WORK}/nan.pfm RESULT_VARIABLE rc)  # 16x8, all NaN
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "could not write the NaN image")
+endif()
+expect_fail(missing "cannot open" ${O} ${WORK}/nope.exr ${B} -o ${O})
+file(WRITE ${WORK}/text.exr "this is not an image\n")
+expect_fail(not_exr "not an OpenEXR file" ${O} ${WORK}/text.exr ${B} -o ${O})
+# a truncated copy: the first 2000 bytes
+execute_process(COMMAND head -c 2000 ${A} OUTPUT_FILE ${WORK}/truncated.exr)
+expect_fail(truncated "truncated.exr" ${O} ${WORK}/truncated.exr ${B} -o ${O})
+expect_fail(channels "missing channel" ${O} ${A} ${B} -o ${O} --channels X,Y,Z)
+expect_fail(variance_channels "missing channel" ${O} ${A} ${B} -o ${O} --variance Var.R,Var.G,Var.B)
+expect_fail(no_output "no output" ${O} ${A} ${B})
+expect_fail(bad_option "unknown option" ${O} ${A} ${B} -o ${O} --frobnicate)
+expect_fail(bad_kernel "kernel" ${O} ${A} ${B} -o ${O} --kernel 4)
+expect_fail(bad_frames "frames" ${O} ${A} ${B} -o ${O} --frames 9-3)
+expect_fail(missing_frame "frame 9" ${WORK}/seq_clean.0009.exr "${WORK}/seq_a.####.exr" "${WORK}/seq_b.####.exr"
+            --frames 9-9 -o "${WORK}/seq_clean.####.exr")
+# halves of different sizes: the 96x80 crop against a 16x8 image
+expect_fail(sizes "differ in size" ${O} ${DATA}/a_color.pfm ${WORK}/nan.pfm --variance-a ${DATA}/a_variance.pfm
+            --variance-b ${WORK}/nan.pfm -o ${O})
+# NaN everywhere
+expect_fail(all_nan "no valid pixel" ${O} ${WORK}/nan.pfm ${WORK}/nan.pfm --variance-a ${WORK}/nan.pfm
+            --variance-b ${WORK}/nan.pfm -o ${O})
