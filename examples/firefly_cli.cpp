@@ -49,6 +49,8 @@ const char* usage_text =
     "  --masks PREFIX           also write PREFIX_a.exr and PREFIX_b.exr with channels\n"
     "                           firefly, highlight, consistent, nonfinite (0 or 1)\n"
     "  --report FILE            JSON report: options, per-frame counts and timings\n"
+    "  --preview PREFIX         PNG previews PREFIX_before.png, PREFIX_after.png (sRGB)\n"
+    "  --exposure X             preview exposure multiplier [1]\n"
     "  -q, --quiet              no progress lines\n"
     "\n"
     "detector options (defaults in brackets)\n"
@@ -69,7 +71,8 @@ const char* usage_text =
     "  -h, --help               this text;  --version  the version\n";
 
 struct cli {
-    std::string in_a, in_b, out, halves, masks, report;
+    std::string in_a, in_b, out, halves, masks, report, preview;
+    float exposure = 1.0f;
     std::string var_a, var_b;  // PFM variance files
     std::vector<std::string> colour = {"R", "G", "B"};
     std::vector<std::string> variance = {"Variance.R", "Variance.G", "Variance.B"};
@@ -157,6 +160,12 @@ std::string parse(int argc, char** argv, cli& c, bool& done) {
             if (!value(c.masks)) return "--masks needs a prefix";
         } else if (a == "--report") {
             if (!value(c.report)) return "--report needs a file name";
+        } else if (a == "--preview") {
+            if (!value(c.preview)) return "--preview needs a prefix";
+            if (!firefly_tools::have_png()) return "--preview needs PNG support: rebuild with libpng-dev installed";
+        } else if (a == "--exposure") {
+            if (!number(d) || !(d > 0)) return "--exposure wants a positive number";
+            c.exposure = static_cast<float>(d);
         } else if (a == "--variance-a") {
             if (!value(c.var_a)) return "--variance-a needs a file name";
         } else if (a == "--variance-b") {
@@ -415,6 +424,15 @@ std::string run_frame(const cli& c, detector& d, long frame, std::string& json) 
             mask[i].assign(static_cast<std::size_t>(w) * static_cast<std::size_t>(ht), 0);
             mv[i] = *make_image_view(mask[i].data(), w, ht);
         }
+    std::vector<float> before;  // the combined input, for the preview
+    if (!c.preview.empty()) {
+        before.resize(static_cast<std::size_t>(w) * static_cast<std::size_t>(ht) * 3);
+        const std::size_t st = h[0].img.channels.size();
+        for (std::size_t i = 0; i < before.size() / 3; ++i)
+            for (int k = 0; k < 3; ++k)
+                before[i * 3 + static_cast<std::size_t>(k)] = 0.5f * h[0].img.pixels[i * st + static_cast<std::size_t>(k)] +
+                                                                0.5f * h[1].img.pixels[i * st + static_cast<std::size_t>(k)];
+    }
     const auto t1 = clock_type::now();
     const frame_report r = d.process(hb[0], hb[1], mv[0], mv[1]);
     const double process_ms = ms_since(t1);
@@ -460,6 +478,12 @@ std::string run_frame(const cli& c, detector& d, long frame, std::string& json) 
             m.pixels[k * 4 + 3] = (mask[i][k] & mask_bits::nonfinite) ? 1.0f : 0.0f;
         }
         e = write_atomic(p, m);
+        if (!e.empty()) return e;
+    }
+    if (!c.preview.empty()) {
+        const std::string p = c.sequence ? frame_path(c.preview, frame) : c.preview;
+        e = firefly_tools::write_png_preview(p + "_before.png", before.data(), w, ht, 3, c.exposure);
+        if (e.empty()) e = firefly_tools::write_png_preview(p + "_after.png", comb.pixels.data(), w, ht, stride, c.exposure);
         if (!e.empty()) return e;
     }
     const double write_ms = ms_since(t2);
