@@ -16,6 +16,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <vector>
 
 #include "bound.hpp"
@@ -113,9 +114,10 @@ public:
         std::size_t n = cache_.bytes();
         for (const auto& h : halves_)
             n += h.sd.capacity() * sizeof(float) + h.label.capacity() +
-                 sd_histogram::buckets * sizeof(std::uint32_t) + h.select_f.capacity() * sizeof(float) +
+                 h.hist.bytes() + h.select_f.capacity() * sizeof(float) +
                  h.select.capacity() * sizeof(double) + h.order.capacity() * sizeof(std::uint32_t) +
-                 h.removed.capacity() * sizeof(double) + h.recon.bytes();
+                 h.removed.capacity() * sizeof(double) + h.keys.capacity() * sizeof(std::uint64_t) +
+                 h.recon.bytes();
         return n;
     }
 
@@ -174,6 +176,7 @@ private:
         std::vector<float> select_f;         // median selection scratch
         std::vector<double> select;          // MAD selection scratch
         std::vector<std::uint32_t> order;    // ESD candidates, removal order
+        std::vector<std::uint64_t> keys;     // sort keys for that order
         std::vector<double> removed;         // their standard deviations
         summary rest;                        // summary of the valid pixels never removed
         std::size_t valid = 0;
@@ -233,30 +236,22 @@ private:
             while (std::isfinite(cut) && !b.above(cut)) cut = std::nextafter(cut, HUGE_VALF);
         }
         const double med = b.median;
-        detail::collect_at_least(sd, n, cut, s.order);
-        // Shifted sums of every other valid value, blocked, branch-free.
+        // One pass: the candidates (>= cut: exactly the values the bound counts, the top
+        // values) and the shifted sums of every other valid value, in fixed blocks.
         double s1 = 0, s2 = 0;
         std::size_t rest_n = 0;
-        for (std::size_t blk = 0; blk < n; blk += detail::block_size) {
-            const std::size_t e = std::min(n, blk + detail::block_size);
-            double b1 = 0, b2 = 0;
-            std::size_t cnt = 0;
-            for (std::size_t i = blk; i < e; ++i) {
-                const float x = sd[i];
-                const bool in = (x >= 0.0f) & (x < cut);
-                const double d = in ? static_cast<double>(x) - med : 0.0;
-                b1 += d;
-                b2 += d * d;
-                cnt += in;
-            }
-            s1 += b1;
-            s2 += b2;
-            rest_n += cnt;
-        }
+        detail::shifted_sums_below(sd, n, cut, med, s1, s2, rest_n, s.order);
         r.bound = s.order.size();
-        std::sort(s.order.begin(), s.order.end(), [sd](std::uint32_t x, std::uint32_t y) {
-            return sd[x] > sd[y] || (sd[x] == sd[y] && x < y);
-        });
+        // Removal order: largest first, lower index first among equals. Sorting packed keys
+        // (the bits of a float >= 0 order like the float) avoids the indirection.
+        s.keys.resize(s.order.size());
+        for (std::size_t j = 0; j < s.order.size(); ++j) {
+            std::uint32_t bits;
+            std::memcpy(&bits, &sd[s.order[j]], 4);
+            s.keys[j] = (static_cast<std::uint64_t>(~bits) << 32) | s.order[j];
+        }
+        std::sort(s.keys.begin(), s.keys.end());
+        for (std::size_t j = 0; j < s.order.size(); ++j) s.order[j] = static_cast<std::uint32_t>(s.keys[j]);
         // At most n - 2 steps: candidates beyond that rejoin the rest.
         const std::size_t m = std::min(s.order.size(), s.valid >= 2 ? s.valid - 2 : 0);
         for (std::size_t j = m; j < s.order.size(); ++j) {

@@ -75,24 +75,65 @@ namespace detail {
 
 inline constexpr std::size_t block_size = 1024;
 
-// Appends to out the indices i with v[i] >= cut (a few percent of the values at most): SSE2
-// tests four at a time and branches only on a match.
-inline void collect_at_least(const float* v, std::size_t n, float cut, std::vector<std::uint32_t>& out) {
-    out.clear();
-    std::size_t i = 0;
+// Over the v[i] in [0, cut): count, sum of (v - shift) and of (v - shift)^2, in double, in
+// fixed blocks (so the result never depends on threads). SSE2 keeps four independent sums
+// per block; the scalar fallback two.
+// The indices i with v[i] >= cut (a few percent at most) are appended to `above` in the
+// same pass, in increasing order.
+inline void shifted_sums_below(const float* v, std::size_t n, float cut, double shift, double& s1, double& s2,
+                               std::size_t& count, std::vector<std::uint32_t>& above) {
+    s1 = s2 = 0.0;
+    count = 0;
+    above.clear();
+    for (std::size_t blk = 0; blk < n; blk += block_size) {
+        const std::size_t e = std::min(n, blk + block_size);
+        std::size_t i = blk;
+        double b1 = 0, b2 = 0;
 #if defined(__SSE2__) || defined(_M_X64)
-    const __m128 c = _mm_set1_ps(cut);
-    for (; i + 4 <= n; i += 4) {
-        int m = _mm_movemask_ps(_mm_cmpge_ps(_mm_loadu_ps(v + i), c));
-        while (m) {
-            const int k = m & -m;
-            out.push_back(static_cast<std::uint32_t>(i + (k == 1 ? 0u : k == 2 ? 1u : k == 4 ? 2u : 3u)));
-            m ^= k;
+        __m128d a1 = _mm_setzero_pd(), a2 = _mm_setzero_pd(), c1 = _mm_setzero_pd(), c2 = _mm_setzero_pd();
+        const __m128 zero = _mm_setzero_ps(), vc = _mm_set1_ps(cut);
+        const __m128d sh = _mm_set1_pd(shift);
+        for (; i + 4 <= e; i += 4) {
+            const __m128 x = _mm_loadu_ps(v + i);
+            const __m128 in = _mm_and_ps(_mm_cmpge_ps(x, zero), _mm_cmplt_ps(x, vc));
+            int hi_mask = _mm_movemask_ps(_mm_cmpge_ps(x, vc));
+            while (hi_mask) {
+                const int k = hi_mask & -hi_mask;
+                above.push_back(static_cast<std::uint32_t>(i + (k == 1 ? 0u : k == 2 ? 1u : k == 4 ? 2u : 3u)));
+                hi_mask ^= k;
+            }
+            const int m = _mm_movemask_ps(in);
+            count += static_cast<std::size_t>((m & 1) + ((m >> 1) & 1) + ((m >> 2) & 1) + ((m >> 3) & 1));
+            const __m128i mi = _mm_castps_si128(in);
+            const __m128d mlo = _mm_castsi128_pd(_mm_unpacklo_epi32(mi, mi));
+            const __m128d mhi = _mm_castsi128_pd(_mm_unpackhi_epi32(mi, mi));
+            const __m128d dlo = _mm_and_pd(_mm_sub_pd(_mm_cvtps_pd(x), sh), mlo);
+            const __m128d dhi = _mm_and_pd(_mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(x, x)), sh), mhi);
+            a1 = _mm_add_pd(a1, dlo);
+            c1 = _mm_add_pd(c1, dhi);
+            a2 = _mm_add_pd(a2, _mm_mul_pd(dlo, dlo));
+            c2 = _mm_add_pd(c2, _mm_mul_pd(dhi, dhi));
         }
-    }
+        double t[2];
+        _mm_storeu_pd(t, _mm_add_pd(a1, c1));
+        b1 = t[0] + t[1];
+        _mm_storeu_pd(t, _mm_add_pd(a2, c2));
+        b2 = t[0] + t[1];
 #endif
-    for (; i < n; ++i)
-        if (v[i] >= cut) out.push_back(static_cast<std::uint32_t>(i));
+        for (; i < e; ++i) {
+            const float x = v[i];
+            if (x >= cut) {
+                above.push_back(static_cast<std::uint32_t>(i));
+            } else if (x >= 0.0f) {
+                const double d = static_cast<double>(x) - shift;
+                b1 += d;
+                b2 += d * d;
+                ++count;
+            }
+        }
+        s1 += b1;
+        s2 += b2;
+    }
 }
 
 // Counts the v[i] in [in_lo, in_hi] and appends to out the v[i] in [lo, hi] outside it
