@@ -150,7 +150,7 @@ inline std::string write_png_preview(const std::string& path, const float* rgb, 
     (void)height;
     (void)stride_channels;
     (void)exposure;
-    return "PNG previews skipped: built without libpng (apt-get install libpng-dev)";
+    return path + " skipped: built without libpng (apt-get install libpng-dev)";
 #endif
 }
 
