@@ -62,6 +62,8 @@ const char* usage_text =
     "  --max-relative-error X   confident rule threshold [0.5]\n"
     "  --max-ratio X            agree rule factor [4]\n"
     "  --min-excess-z X         one-half outliers must exceed the other half by X sd [4]; 0: off\n"
+    "  --cluster-relative-error X  confident rule bound for pixels next to another both-half\n"
+    "                           outlier (highlights are spatially coherent) [0.8]; 0: off\n"
     "  --kernel N               reconstruction kernel width, odd [5]\n"
     "  --sigma X                reconstruction Gaussian sigma [1]\n"
     "  --tolerance X            phase 2 relative tolerance [1e-3]\n"
@@ -225,6 +227,9 @@ std::string parse(int argc, char** argv, cli& c, bool& done) {
         } else if (a == "--min-excess-z") {
             if (!number(d) || d < 0) return "--min-excess-z wants a number >= 0";
             c.o.highlight.min_excess_z = d;
+        } else if (a == "--cluster-relative-error") {
+            if (!number(d) || d < 0) return "--cluster-relative-error wants a number >= 0";
+            c.o.highlight.cluster_relative_error = d;
         } else if (a == "--kernel") {
             if (!number(d) || d != std::floor(d)) return "--kernel wants an odd whole number";
             c.o.reconstruction.kernel_width = static_cast<int>(d);
@@ -534,12 +539,13 @@ int main(int argc, char** argv) {
         std::snprintf(opts, sizeof opts,
                       "{\"significance\": %g, \"bound\": %g, \"reduction\": \"%s\", \"lambdas\": \"%s\", "
                       "\"highlight_rule\": \"%s\", \"max_relative_error\": %g, \"max_ratio\": %g, \"min_excess_z\": %g, "
+                      "\"cluster_relative_error\": %g, "
                       "\"kernel\": %d, \"sigma\": %g, \"tolerance\": %g, \"iterations\": %d, \"threads\": %u}",
                       c.o.alpha, c.o.bound_threshold,
                       c.o.reduction == variance_reduction::mean ? "mean" : c.o.reduction == variance_reduction::luminance ? "luminance" : "max",
                       c.o.lambdas == lambda_method::exact ? "exact" : c.o.lambdas == lambda_method::hill ? "hill" : "normal",
                       rule_name(c.o.highlight.rule), c.o.highlight.max_relative_error, c.o.highlight.max_ratio,
-                      c.o.highlight.min_excess_z, c.o.reconstruction.kernel_width, c.o.reconstruction.sigma,
+                      c.o.highlight.min_excess_z, c.o.highlight.cluster_relative_error, c.o.reconstruction.kernel_width, c.o.reconstruction.sigma,
                       c.o.reconstruction.tolerance, c.o.reconstruction.max_iterations, c.threads);
         std::string text = "{\n  \"firefly\": \"" + std::to_string(FIREFLY_VERSION_MAJOR) + "." +
                            std::to_string(FIREFLY_VERSION_MINOR) + "." + std::to_string(FIREFLY_VERSION_PATCH) +

@@ -109,6 +109,72 @@ TEST_CASE("two unrelated fireflies on one pixel are not a highlight (default rul
     CHECK(hg.f.color[0][(20 * 64 + 20) * 3] == 300.0f);
 }
 
+TEST_CASE("a noisy highlight spot is kept as a cluster; the same pixel alone is not", "[pipeline][highlight]") {
+    // Relative error 0.6 over both halves: above max_relative_error (0.5), below
+    // cluster_relative_error (0.8). As a 3x3 spot it is a highlight; as one pixel it is not.
+    auto bright = [](sim::frame& f, int x, int y) {
+        for (int half = 0; half < 2; ++half) {
+            const std::size_t i = static_cast<std::size_t>(y * f.width + x);
+            for (int c = 0; c < 3; ++c) {
+                f.color[half][i * 3 + c] = 30.0f;
+                f.variance[half][i * 3 + c] = 648.0f;  // sqrt(2 * 648) / 60 = 0.6
+            }
+        }
+    };
+    sim::frame f = flat(64, 48, 11);
+    for (int y = 20; y < 23; ++y)
+        for (int x = 20; x < 23; ++x) bright(f, x, y);
+    bright(f, 50, 10);
+    const sim::frame orig = f;
+    halves hv(f);
+    detector d;
+    const frame_report r = d.process(hv.h[0], hv.h[1]);
+    REQUIRE(r.error.ok());
+    CHECK(r.half[0].highlights == 9);
+    CHECK(hv.f.color[0][(21 * 64 + 21) * 3] == 30.0f);
+    CHECK(hv.f.color[0][(10 * 64 + 50) * 3] < 5.0f);  // isolated: rebuilt in both halves
+    CHECK(hv.f.color[1][(10 * 64 + 50) * 3] < 5.0f);
+    // with the cluster rule off, the spot goes too
+    sim::frame g = orig;
+    halves hg(g);
+    detector_options o;
+    o.highlight.cluster_relative_error = 0;
+    detector strict(o);
+    (void)strict.process(hg.h[0], hg.h[1]);
+    CHECK(hg.f.color[0][(21 * 64 + 21) * 3] < 5.0f);
+}
+
+TEST_CASE("a firefly on top of a highlight is rebuilt in its half only", "[pipeline][highlight]") {
+    sim::frame f = flat(64, 48, 12);
+    for (int y = 29; y < 32; ++y)  // a 3x3 highlight spot, confident in both halves
+        for (int x = 29; x < 32; ++x)
+            for (int half = 0; half < 2; ++half)
+                for (int c = 0; c < 3; ++c) {
+                    const std::size_t j = static_cast<std::size_t>(y * 64 + x);
+                    f.color[half][j * 3 + c] = 40.0f;
+                    f.variance[half][j * 3 + c] = 9.0f;
+                }
+    const std::size_t i = 30 * 64 + 30;
+    for (int c = 0; c < 3; ++c) {  // a firefly sample in half A at the centre
+        f.color[0][i * 3 + c] = 140.0f;
+        f.variance[0][i * 3 + c] = 9.0f + 100.0f * 100.0f;
+    }
+    halves hv(f);
+    std::vector<std::uint8_t> ma(64 * 48), mb(64 * 48);
+    detector d;
+    const frame_report r = d.process(hv.h[0], hv.h[1], *make_image_view(ma.data(), 64, 48),
+                                     *make_image_view(mb.data(), 64, 48));
+    REQUIRE(r.error.ok());
+    // relative error sqrt(10018) / 180 = 0.56: a highlight as part of the spot; but A
+    // exceeds B by 100 >> 4 sqrt(2 * 9): A's centre is a firefly on the highlight.
+    CHECK(ma[i] == mask_bits::firefly);
+    CHECK(mb[i] == mask_bits::highlight);
+    CHECK(hv.f.color[1][i * 3] == 40.0f);  // B keeps its highlight
+    CHECK(hv.f.color[0][i * 3] < 60.0f);   // A rebuilt, from the spot around it
+    CHECK(hv.f.color[0][i * 3] > 5.0f);
+    CHECK(ma[(30 * 64 + 29)] == mask_bits::highlight);
+}
+
 TEST_CASE("NaN and Inf pixels are repaired", "[pipeline]") {
     sim::frame f = flat(40, 30, 3);
     f.color[0][(5 * 40 + 5) * 3 + 1] = std::numeric_limits<float>::quiet_NaN();

@@ -16,6 +16,13 @@
 //                of the estimate compared with a test per half.
 //   confident_and_agree   both of the above
 //
+// Clusters: a highlight is spatially coherent (a spot, a streak, a disk), while two unrelated
+// fireflies meeting on one pixel are an isolated coincidence; two such coincidences side by
+// side are rarer still (about (pA pB)^2 per pixel). So a both-half outlier that has another
+// one among its 8 neighbours is held to the looser cluster_relative_error. This keeps
+// highlights at low sample counts, where even a real highlight's relative error passes 0.5
+// (c / sqrt(2N) for N samples per half of relative spread c).
+//
 // An outlier in ONE half only is a firefly in the paper. It must also stand out against the
 // other half, though: a firefly makes its half exceed the other by many times the noise,
 // while a bright, noisy but legitimate pixel (a thin line, a checker cell) that the global
@@ -47,6 +54,7 @@ struct highlight_options {
     double max_ratio = 4.0;            // agree: max(LA, LB) / min(LA, LB)
     double max_relative_error = 0.5;   // confident: sqrt(vA + vB) / |A + B|, calibrated
     double min_excess_z = 4.0;         // one-half outliers: required excess over the other half
+    double cluster_relative_error = 0.8;  // confident, for pixels with a both-half neighbour
 };
 
 // Decide an outlier of one half only: true when it stands out against the other half.
@@ -86,9 +94,10 @@ private:
 };
 
 // Decide one pixel that is an outlier in both halves. la, lb: mean colour of the pixel in
-// each half; va, vb: its reduced variance in each half; calibration: variance_calibration::factor().
+// each half; va, vb: its reduced variance in each half; calibration: variance_calibration::factor();
+// in_cluster: another both-half outlier is among its 8 neighbours.
 inline bool is_highlight(const highlight_options& o, double la, double lb, double va, double vb,
-                         double calibration) noexcept {
+                         double calibration, bool in_cluster = false) noexcept {
     const bool want_agree =
         o.rule == highlight_rule::agree || o.rule == highlight_rule::confident_and_agree;
     const bool want_conf =
@@ -99,8 +108,10 @@ inline bool is_highlight(const highlight_options& o, double la, double lb, doubl
         if (!(hi <= o.max_ratio * lo)) return false;
     }
     if (want_conf) {
+        const double limit = in_cluster ? std::max(o.max_relative_error, o.cluster_relative_error)
+                                        : o.max_relative_error;
         const double se = std::sqrt((std::max(va, 0.0) + std::max(vb, 0.0)) * calibration);
-        if (!(se <= o.max_relative_error * std::fabs(la + lb))) return false;
+        if (!(se <= limit * std::fabs(la + lb))) return false;
     }
     return true;
 }

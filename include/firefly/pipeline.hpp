@@ -56,7 +56,7 @@ inline status check_options(const detector_options& o) noexcept {
     if (!(o.bound_threshold >= 0.0) || !std::isfinite(o.bound_threshold))
         return status{errc::invalid_argument, "bound threshold must be finite and >= 0"};
     if (!(o.highlight.max_ratio >= 1.0) || !(o.highlight.max_relative_error >= 0.0) ||
-        !(o.highlight.min_excess_z >= 0.0))
+        !(o.highlight.min_excess_z >= 0.0) || !(o.highlight.cluster_relative_error >= 0.0))
         return status{errc::invalid_argument,
                       "highlight: max_ratio >= 1, max_relative_error >= 0, min_excess_z >= 0"};
     return check_reconstruct_options(o.reconstruction);
@@ -333,14 +333,28 @@ private:
             return detail::reduce_variance(&v(x, y, 0), v.channel_stride(), v.channels(), options_.reduction,
                                            nonfinite, negative);
         };
+        const int hgt = a.color.height();
+        auto both = [&](int x, int y) {
+            const std::size_t j = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+            return (lab[0][j] & outlier_bit) && (lab[1][j] & outlier_bit);
+        };
         for (const std::uint32_t i : pairs) {
             const int x = static_cast<int>(i % static_cast<std::uint32_t>(w));
             const int y = static_cast<int>(i / static_cast<std::uint32_t>(w));
-            if (is_highlight(ho, mean_colour(a.color, x, y), mean_colour(b.color, x, y),
-                             reduced_variance(a.variance, x, y), reduced_variance(b.variance, x, y), calibration)) {
-                lab[0][i] |= highlight_bit;
-                lab[1][i] |= highlight_bit;
-            }
+            bool cluster = false;
+            for (int dy = -1; dy <= 1 && !cluster; ++dy)
+                for (int dx = -1; dx <= 1 && !cluster; ++dx)
+                    if ((dx || dy) && x + dx >= 0 && y + dy >= 0 && x + dx < w && y + dy < hgt)
+                        cluster = both(x + dx, y + dy);
+            const double la = mean_colour(a.color, x, y), lb = mean_colour(b.color, x, y);
+            const double va = reduced_variance(a.variance, x, y), vb = reduced_variance(b.variance, x, y);
+            if (!is_highlight(ho, la, lb, va, vb, calibration, cluster)) continue;  // both rebuilt
+            // A highlight. A firefly may still sit on top of it in one half: that half then
+            // exceeds the other by far more than the noise, and only it is rebuilt.
+            const bool a_over = ho.min_excess_z > 0 && exceeds_other_half(ho, la, lb, vb, calibration);
+            const bool b_over = ho.min_excess_z > 0 && exceeds_other_half(ho, lb, la, va, calibration);
+            if (!a_over) lab[0][i] |= highlight_bit;
+            if (!b_over) lab[1][i] |= highlight_bit;
         }
         if (!check_single) return;
         for (int h = 0; h < 2; ++h)
