@@ -67,7 +67,7 @@ void detect(benchmark::State& st, bool warm) {
     working_copy c(f);
     detector_options o;
     o.reconstruct = false;
-    detector d(o);
+    detector d(o, executor::threads(static_cast<unsigned>(st.range(2))));
     frame_report r = d.process(c.half[0], c.half[1]);
     for (auto _ : st) {
         if (!warm) d.lambdas().clear();
@@ -77,8 +77,12 @@ void detect(benchmark::State& st, bool warm) {
     st.counters["outliers"] = static_cast<double>(r.half[0].outliers + r.half[1].outliers);
     st.counters["lambdas_per_frame"] = static_cast<double>(r.lambdas_computed);
 }
-BENCHMARK_CAPTURE(detect, warm, true)->Args({256, 256})->Args({2048, 1080})->Unit(benchmark::kMillisecond);
-BENCHMARK_CAPTURE(detect, cold, false)->Args({256, 256})->Args({2048, 1080})->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(detect, warm, true)
+    ->Args({256, 256, 1})->Args({2048, 1080, 1})->Args({2048, 1080, 2})
+    ->ArgNames({"w", "h", "threads"})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(detect, cold, false)
+    ->Args({256, 256, 1})->Args({2048, 1080, 1})
+    ->ArgNames({"w", "h", "threads"})->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // The whole pipeline, cleaning both halves in place (inputs restored outside the timing).
 void pipeline(benchmark::State& st) {

@@ -146,18 +146,8 @@ public:
                 return status{errc::size_overflow, "width x pixel stride overflows"};
             row_stride = ps * width;
         }
-        image_view v;
-        v.width_ = width;
-        v.height_ = height;
-        v.channels_ = channels;
-        v.channel_stride_ = channel_stride;
-        v.pixel_stride_ = pixel_stride;
-        v.row_stride_ = row_stride;
-        v.data_ = data;
-        if (width == 0 || height == 0) {
-            v.data_ = data;  // an empty image: pointer may be null
-            return v;
-        }
+        const image_view v = unchecked(data, width, height, channels, pixel_stride, row_stride, channel_stride);
+        if (width == 0 || height == 0) return v;  // an empty image: the pointer may be null
         if (data == nullptr) return status{errc::null_data, "image has pixels but data is null"};
         const auto a = static_cast<std::ptrdiff_t>(alignof(T));
         if (channel_stride % a != 0 || pixel_stride % a != 0 || row_stride % a != 0)
