@@ -35,6 +35,18 @@ struct bound_result {
 inline constexpr double modified_zscore_constant = 0.6745;
 inline constexpr double mean_ad_constant = 1.253314;
 
+// Sets r.scale from r.mad, or from the mean absolute deviation about the median when the MAD
+// is 0 (mean_ad() computes it only then). A scale of 0 means every value is the median.
+template <class MeanAbsDev>
+void set_bound_scale(bound_result& r, MeanAbsDev&& mean_ad) {
+    if (r.mad > 0) {
+        r.scale = r.mad / modified_zscore_constant;
+    } else {
+        r.mad_fallback = true;
+        r.scale = mean_ad_constant * mean_ad();
+    }
+}
+
 // Generic form: the kept value(i), i in [0, n). Non-finite values never take part.
 template <class Value, class Keep>
 bound_result modified_zscore_bound_if(std::size_t n, Value&& value, Keep&& keep, double threshold,
@@ -55,16 +67,11 @@ bound_result modified_zscore_bound_if(std::size_t n, Value&& value, Keep&& keep,
     const double med = r.median;
     auto dev = [&](std::size_t i) { return std::fabs(static_cast<double>(value(i)) - med); };
     (void)median_of(n, dev, kept, count, r.mad, scratch);
-    if (r.mad > 0) {
-        r.scale = r.mad / modified_zscore_constant;
-    } else {
-        const double mean_ad =
-            detail::blocked_sum(n, [&](std::size_t i) { return kept(i) ? dev(i) : 0.0; }) /
-            static_cast<double>(count);
-        r.mad_fallback = true;
-        r.scale = mean_ad_constant * mean_ad;
-        if (!(r.scale > 0)) return r;  // every value equals the median: nothing stands out
-    }
+    set_bound_scale(r, [&] {
+        return detail::blocked_sum(n, [&](std::size_t i) { return kept(i) ? dev(i) : 0.0; }) /
+               static_cast<double>(count);
+    });
+    if (!(r.scale > 0)) return r;  // every value equals the median: nothing stands out
     r.cutoff = med + threshold * r.scale;
     for (std::size_t i = 0; i < n; ++i)
         if (kept(i) && r.above(static_cast<double>(value(i)))) ++r.count;

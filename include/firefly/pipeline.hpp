@@ -13,6 +13,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -214,15 +215,11 @@ private:
         if (c.valid > 0) {
             b.median = s.hist.median(sd, n, s.select_f);
             b.mad = s.hist.mad(sd, n, b.median, s.select);
-            if (b.mad > 0) {
-                b.scale = b.mad / modified_zscore_constant;
-            } else {
-                const double mean_ad = detail::blocked_sum(n, [&](std::size_t i) {
-                    return sd[i] >= 0 ? std::fabs(static_cast<double>(sd[i]) - b.median) : 0.0;
-                }) / static_cast<double>(c.valid);
-                b.mad_fallback = true;
-                b.scale = mean_ad_constant * mean_ad;
-            }
+            set_bound_scale(b, [&] {
+                return detail::blocked_sum(n, [&](std::size_t i) {
+                           return sd[i] >= 0 ? std::fabs(static_cast<double>(sd[i]) - b.median) : 0.0;
+                       }) / static_cast<double>(c.valid);
+            });
         }
         r.median = b.median;
         r.mad = b.mad;
@@ -231,7 +228,7 @@ private:
         float cut = HUGE_VALF;
         if (b.scale > 0) {
             const double guess = b.median + b.threshold * b.scale;
-            cut = guess < 3.4e38 ? static_cast<float>(guess) : HUGE_VALF;
+            cut = guess <= static_cast<double>(FLT_MAX) ? static_cast<float>(guess) : HUGE_VALF;
             while (cut > 0 && b.above(std::nextafter(cut, 0.0f))) cut = std::nextafter(cut, 0.0f);
             while (std::isfinite(cut) && !b.above(cut)) cut = std::nextafter(cut, HUGE_VALF);
         }
