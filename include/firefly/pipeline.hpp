@@ -306,10 +306,14 @@ private:
                               ho.rule == highlight_rule::confident_and_agree;
         double calibration = 1.0;
         if (need_cal) {
-            // (A - B)^2 / (vA + vB) over ordinary pixels on a fixed 8x8 lattice.
+            // (A - B)^2 / (vA + vB) over ordinary pixels on a lattice of about 16k pixels,
+            // whatever the resolution: a median of that many ratios is good to ~1%.
             calibration_.clear();
-            for (int y = 0; y < a.color.height(); y += 8)
-                for (int x = 0; x < w; x += 8) {
+            const int hgt = a.color.height();
+            const double cells = static_cast<double>(w) * static_cast<double>(hgt) / 16384.0;
+            const int step = std::max(1, static_cast<int>(std::sqrt(cells)));
+            for (int y = step / 2; y < hgt; y += step)
+                for (int x = step / 2; x < w; x += step) {
                     const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
                     if (lab[0][i] != valid_class || lab[1][i] != valid_class) continue;
                     for (int c = 0; c < nc; ++c)
