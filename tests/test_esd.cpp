@@ -296,3 +296,48 @@ TEST_CASE("bound: one-sided, MAD = 0 fallback, constant data", "[bound]") {
     CHECK(wn.n == 3);
     CHECK(wn.median == 2.0);
 }
+
+TEST_CASE("the detector's histogram median and MAD equal a full sort, bit for bit", "[bound][hard]") {
+    std::mt19937_64 g(99);
+    auto check = [](const std::vector<float>& v, const char* what) {
+        std::vector<double> kept;
+        for (float x : v)
+            if (x >= 0) kept.push_back(x);
+        if (kept.empty()) return;
+        std::sort(kept.begin(), kept.end());
+        const std::size_t n = kept.size();
+        const double med = n % 2 ? kept[n / 2] : 0.5 * kept[n / 2 - 1] + 0.5 * kept[n / 2];
+        std::vector<double> dev;
+        for (double x : kept) dev.push_back(std::fabs(x - med));
+        std::sort(dev.begin(), dev.end());
+        const double mad = n % 2 ? dev[n / 2] : 0.5 * dev[n / 2 - 1] + 0.5 * dev[n / 2];
+        sd_histogram h;
+        h.build(v.data(), v.size());
+        std::vector<float> sf;
+        std::vector<double> sd;
+        INFO(what << ", n = " << n);
+        const double m = h.median(v.data(), v.size(), sf);
+        CHECK(m == med);
+        CHECK(h.mad(v.data(), v.size(), m, sd) == mad);
+    };
+    for (std::size_t n : {1u, 2u, 3u, 4u, 5u, 17u, 1000u, 100001u}) {
+        std::vector<float> v(n);
+        std::gamma_distribution<float> gam(2.0f, 0.05f);
+        for (auto& x : v) x = gam(g);
+        check(v, "gamma");
+        for (std::size_t i = 0; i < n; i += 3) v[i] = 0.25f;  // heavy ties at one value
+        check(v, "ties");
+        for (std::size_t i = 1; i < n; i += 5) v[i] = -1.0f;  // ignored pixels
+        for (std::size_t i = 2; i < n; i += 7) v[i] = std::numeric_limits<float>::quiet_NaN();
+        check(v, "with ignored and NaN");
+        for (std::size_t i = 0; i < n; i += 11) v[i] = FLT_MAX;
+        for (std::size_t i = 4; i < n; i += 13) v[i] = 1e-45f;  // denormal
+        for (std::size_t i = 5; i < n; i += 17) v[i] = 0.0f;
+        check(v, "extremes");
+        std::vector<float> c(n, 3.0f);
+        check(c, "constant");
+        std::vector<float> two(n);
+        for (std::size_t i = 0; i < n; ++i) two[i] = i % 2 ? 1.0f : 1e30f;
+        check(two, "two values far apart");
+    }
+}
