@@ -258,7 +258,8 @@ inline void sqrt_nonnegative(float* sd, std::size_t n) noexcept {
 // (a multiple of 4; the caller finishes the rest) and counts negative-variance pixels.
 template <bool HasAlpha>
 std::size_t stddev_rgb_mean_sse2(const float* col, const float* var, const float* alpha, std::size_t n, float* sd,
-                                 std::uint8_t* label, std::size_t& negative_n) noexcept {
+                                 std::uint8_t* label, std::size_t& negative_n, std::size_t& nonfinite_n,
+                                 std::size_t& ignored_n) noexcept {
     const __m128i exp = _mm_set1_epi32(0x7f800000), mag = _mm_set1_epi32(0x7fffffff);
     const __m128i zero_i = _mm_setzero_si128();
     const __m128 three = _mm_set1_ps(3.0f), minus_one = _mm_set1_ps(-1.0f);
@@ -273,7 +274,8 @@ std::size_t stddev_rgb_mean_sse2(const float* col, const float* var, const float
                            _MM_SHUFFLE(2, 0, 2, 0));
     };
     auto is_exp = [&](__m128 x) { return _mm_cmpeq_epi32(_mm_and_si128(_mm_castps_si128(x), exp), exp); };
-    std::size_t i = 0, neg = 0;
+    std::size_t i = 0, neg = 0, nf_count = 0, ig_count = 0;
+    auto bits4 = [](int m) { return static_cast<std::size_t>((m & 1) + ((m >> 1) & 1) + ((m >> 2) & 1) + ((m >> 3) & 1)); };
     for (; i + 4 <= n; i += 4) {
         __m128 c0, c1, c2, v0, v1, v2;
         split(col + 3 * i, c0, c1, c2);
@@ -298,7 +300,7 @@ std::size_t stddev_rgb_mean_sse2(const float* col, const float* var, const float
         };
         const __m128i n0 = negative(v0), n1 = negative(v1), n2 = negative(v2);
         const int nm = _mm_movemask_ps(_mm_castsi128_ps(_mm_or_si128(_mm_or_si128(n0, n1), n2)));
-        neg += static_cast<std::size_t>((nm & 1) + ((nm >> 1) & 1) + ((nm >> 2) & 1) + ((nm >> 3) & 1));
+        neg += bits4(nm);
         auto clamp = [&](__m128 x, __m128i nx) {
             return _mm_castsi128_ps(_mm_andnot_si128(nx, _mm_and_si128(_mm_castps_si128(x), mag)));
         };
@@ -316,8 +318,13 @@ std::size_t stddev_rgb_mean_sse2(const float* col, const float* var, const float
         const __m128i bytes = _mm_packus_epi16(_mm_packs_epi32(lab, zero_i), zero_i);
         const int word = _mm_cvtsi128_si32(bytes);
         std::memcpy(label + i, &word, 4);
+        const int nfm = _mm_movemask_ps(nf);
+        nf_count += bits4(nfm);
+        ig_count += bits4(_mm_movemask_ps(ig) & ~nfm);
     }
     negative_n += neg;
+    nonfinite_n += nf_count;
+    ignored_n += ig_count;
     return i;
 }
 #endif
@@ -380,17 +387,18 @@ stddev_counts stddev_pass(const image_view<C>& color, const image_view<V>& varia
 #if defined(__SSE2__) || defined(_M_X64)
         if (packed && cc == 3 && vc == 3 && how == variance_reduction::mean) {
             // Whole pass (root and labels included) by hand; the tail by the generic kernel.
-            const std::size_t head = ap ? stddev_rgb_mean_sse2<true>(color.data(), variance.data(), ap, n, sd, label, negative_n)
-                                        : stddev_rgb_mean_sse2<false>(color.data(), variance.data(), ap, n, sd, label, negative_n);
+            std::size_t nf = 0, ig = 0;
+            const std::size_t head =
+                ap ? stddev_rgb_mean_sse2<true>(color.data(), variance.data(), ap, n, sd, label, negative_n, nf, ig)
+                   : stddev_rgb_mean_sse2<false>(color.data(), variance.data(), ap, n, sd, label, negative_n, nf, ig);
             negative_n += stddev_packed<3, 3>(color.data() + 3 * head, variance.data() + 3 * head, ap ? ap + head : nullptr,
                                               n - head, how, sd + head);
-            for (std::size_t i = head; i < n; ++i) label[i] = label_of(sd[i]);
-            sqrt_nonnegative(sd + head, n - head);
-            std::size_t nf = 0, ig = 0;
-            for (std::size_t i = 0; i < n; ++i) {
+            for (std::size_t i = head; i < n; ++i) {
+                label[i] = label_of(sd[i]);
                 nf += label[i] >> 1;
                 ig += label[i] & 1u;
             }
+            sqrt_nonnegative(sd + head, n - head);
             counts.valid = n - nf - ig;
             counts.ignored = ig;
             counts.nonfinite = nf;
