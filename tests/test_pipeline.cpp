@@ -217,6 +217,29 @@ TEST_CASE("one thread and two threads give bit-identical outputs", "[pipeline][i
     CHECK(std::memcmp(a.f.color[0].data(), c.f.color[0].data(), a.f.color[0].size() * 4) == 0);
 }
 
+TEST_CASE("the variance convention does not matter (of the samples or of the mean)", "[pipeline][invariant]") {
+    // A renderer that stores the variance of the samples gives N times the variance of the
+    // mean. Powers of two keep the scaling exact: the colour output must be bit-identical.
+    const sim::scene s = sim::named_scene("production", 160, 120, 8);
+    halves base(sim::simulate(s));
+    detector d;
+    const frame_report r0 = d.process(base.h[0], base.h[1]);
+    for (float k : {64.0f, 0.25f}) {
+        sim::frame f = sim::simulate(s);
+        for (auto& v : f.variance)
+            for (auto& x : v) x *= k;
+        halves hv(std::move(f));
+        detector dk;
+        const frame_report r = dk.process(hv.h[0], hv.h[1]);
+        INFO("variance x " << k);
+        CHECK(r.variance_calibration == r0.variance_calibration / k);
+        CHECK(r.half[0].fireflies == r0.half[0].fireflies);
+        CHECK(r.half[1].highlights == r0.half[1].highlights);
+        for (int half = 0; half < 2; ++half)
+            CHECK(std::memcmp(hv.f.color[half].data(), base.f.color[half].data(), base.f.color[half].size() * 4) == 0);
+    }
+}
+
 TEST_CASE("the detector's lambda cache is reused by the second frame", "[pipeline]") {
     const sim::scene s = sim::named_scene("sparse_fireflies", 128, 96, 6);
     halves a(sim::simulate(s)), b(sim::simulate(s));
