@@ -135,7 +135,7 @@ private:
     std::size_t hits_ = 0;
 };
 
-struct esd_result {
+struct [[nodiscard]] esd_result {
     status error{};                       // invalid_argument for a bad alpha
     std::size_t n = 0;                    // finite values tested
     std::size_t outliers = 0;             // largest i with R_i > lambda_i

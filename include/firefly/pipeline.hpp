@@ -92,7 +92,7 @@ struct half_report {
     status reconstruction{};            // no_valid_pixels when nothing could be read
 };
 
-struct frame_report {
+struct [[nodiscard]] frame_report {
     status error{};                     // set when the inputs or options are refused
     half_report half[2];
     std::size_t both_outliers = 0;      // pixels that are outliers in both halves

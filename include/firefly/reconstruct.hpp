@@ -41,7 +41,7 @@ struct reconstruct_options {
     int max_iterations = 20;    // phase 2 iteration cap (0: phase 1 only)
 };
 
-struct reconstruct_report {
+struct [[nodiscard]] reconstruct_report {
     status error{};               // no_valid_pixels when nothing could be read at all
     std::size_t pixels = 0;       // marked pixels
     std::size_t unreachable = 0;  // marked pixels left without a value (no valid pixel at all)
