@@ -355,3 +355,81 @@ TEST_CASE("combine_halves: mean and variance of the mean", "[pipeline]") {
     std::vector<float> small(2);
     CHECK(combine_halves(V(a), V(b), *make_image_view(small.data(), 2, 1, 1)).code() == errc::size_mismatch);
 }
+
+TEST_CASE("random frames: no NaN out, unmarked pixels untouched, layouts agree", "[pipeline][fuzz]") {
+    std::uint64_t state = 0x9E3779B97F4A7C15ull;
+    auto next = [&] {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        return state;
+    };
+    auto uniform = [&] { return static_cast<double>(next() >> 11) * 0x1.0p-53; };
+    auto value = [&](bool variance) -> float {
+        const double u = uniform();
+        if (u < 0.02) return std::numeric_limits<float>::quiet_NaN();
+        if (u < 0.03) return (u < 0.025 ? 1.0f : -1.0f) * std::numeric_limits<float>::infinity();
+        if (u < 0.05) return 0.0f;
+        if (u < 0.06) return variance ? -1e-6f : -0.5f;
+        if (u < 0.07) return FLT_MAX;
+        if (u < 0.08) return 1e-40f;
+        if (u < 0.10) return static_cast<float>(1e4 * uniform());  // a firefly
+        return static_cast<float>(uniform() * (variance ? 0.01 : 1.0));
+    };
+    for (int round = 0; round < 300; ++round) {
+        const int w = 1 + static_cast<int>(next() % 40), h = 1 + static_cast<int>(next() % 30);
+        const std::size_t n = static_cast<std::size_t>(w * h);
+        std::vector<float> c[2], v[2];
+        for (int k = 0; k < 2; ++k) {
+            c[k].resize(n * 3);
+            v[k].resize(n * 3);
+            for (auto& x : c[k]) x = value(false);
+            for (auto& x : v[k]) x = value(true);
+        }
+        const std::vector<float> c0[2] = {c[0], c[1]}, v0[2] = {v[0], v[1]};
+        // the same frame as RGBA (alpha channel unused) for the layout check
+        std::vector<float> ca[2], va[2];
+        for (int k = 0; k < 2; ++k) {
+            ca[k].assign(n * 4, 7.0f);
+            va[k].assign(n * 4, 7.0f);
+            for (std::size_t i = 0; i < n; ++i)
+                for (int ch = 0; ch < 3; ++ch) {
+                    ca[k][i * 4 + ch] = c[k][i * 3 + ch];
+                    va[k][i * 4 + ch] = v[k][i * 3 + ch];
+                }
+        }
+        half_buffer<float> hb[2], hr[2];
+        std::vector<std::uint8_t> m[2];
+        for (int k = 0; k < 2; ++k) {
+            hb[k].color = *make_image_view(c[k].data(), w, h, 3);
+            hb[k].variance = *make_image_view(v[k].data(), w, h, 3);
+            hr[k].color = *make_image_view(ca[k].data(), w, h, 4)->channel_range(0, 3);
+            hr[k].variance = *make_image_view(va[k].data(), w, h, 4)->channel_range(0, 3);
+            m[k].assign(n, 0);
+        }
+        detector d, dr(detector_options{}, executor::threads(2));
+        const frame_report r = d.process(hb[0], hb[1], *make_image_view(m[0].data(), w, h), *make_image_view(m[1].data(), w, h));
+        const frame_report rr = dr.process(hr[0], hr[1]);
+        INFO("round " << round << ", " << w << "x" << h);
+        REQUIRE(r.error.ok());
+        REQUIRE(rr.error.ok());
+        bool finite = true, untouched = true, same = true;
+        for (int k = 0; k < 2; ++k)
+            for (std::size_t i = 0; i < n; ++i) {
+                const bool marked = (m[k][i] & (mask_bits::firefly | mask_bits::nonfinite)) != 0;
+                for (int ch = 0; ch < 3; ++ch) {
+                    const std::size_t j = i * 3 + ch;
+                    finite &= std::isfinite(c[k][j]) && std::isfinite(v[k][j]);
+                    if (!marked)
+                        untouched &= std::memcmp(&c[k][j], &c0[k][j], 4) == 0 && std::memcmp(&v[k][j], &v0[k][j], 4) == 0;
+                    same &= std::memcmp(&c[k][j], &ca[k][i * 4 + ch], 4) == 0 &&
+                            std::memcmp(&v[k][j], &va[k][i * 4 + ch], 4) == 0;
+                }
+                same &= ca[k][i * 4 + 3] == 7.0f;  // the fourth channel is never touched
+            }
+        CHECK(finite);
+        CHECK(untouched);
+        CHECK(same);
+        CHECK(r.half[0].fireflies == rr.half[0].fireflies);
+    }
+}
