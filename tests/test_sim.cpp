@@ -63,6 +63,12 @@ TEST_CASE("only the effects a scene lists are simulated", "[sim]") {
     // ~0.5% of pixels per half by default
     CHECK(ff > f.pixels() / 400);
     CHECK(ff < f.pixels() / 100);
+    s.firefly_probability = 1e-3;  // per sample: 1 - (1 - 1e-3)^64 = 6.2% of pixels per half
+    f = sim::simulate(s);
+    ff = 0;
+    for (std::size_t i = 0; i < f.pixels(); ++i) ff += f.firefly_energy[0][i] > 0;
+    CHECK(static_cast<double>(ff) / static_cast<double>(f.pixels()) == Approx(0.062).epsilon(0.1));
+    s.firefly_probability = 0;
     s.effects = sim::black_background | sim::alpha_coverage;
     f = sim::simulate(s);
     CHECK(!f.alpha.empty());

@@ -46,7 +46,8 @@ struct scene {
     std::uint32_t effects = 0;
     double base = 0.5;                   // base radiance
     double noise = 0.6;                  // per-sample relative standard deviation
-    double firefly_pixel_rate = 0.005;   // expected share of pixels hit, per half
+    double firefly_pixel_rate = 0.005;   // expected share of pixels hit, per half ...
+    double firefly_probability = 0.0;    // ... or, when > 0, the probability of each sample
     double firefly_energy = 400.0;       // firefly sample value, x base (x U[0.5, 1.5))
     int highlight_count = 60;            // small highlight spots
     double highlight_radiance = 25.0;    // x base
@@ -170,7 +171,11 @@ inline frame simulate(const scene& sc) {
     std::vector<float> sigma(np, 0.0f);  // per-sample relative sd
     const double tint[3] = {1.0, 0.85, 0.7};
     const double ff_mean_energy = sc.firefly_energy * sc.base;  // E[U[0.5,1.5)] = 1
-    const double p_sample = (fx & fireflies) ? -std::log1p(-std::min(sc.firefly_pixel_rate, 0.5)) / n : 0.0;
+    // Per-sample probability: given, or from the share of pixels hit (a Poisson rate:
+    // n p = -log(1 - rate), so that 1 - exp(-n p) = rate).
+    const double p_sample = !(fx & fireflies)            ? 0.0
+                            : sc.firefly_probability > 0 ? std::min(sc.firefly_probability, 1.0)
+                                                         : -std::log1p(-std::min(sc.firefly_pixel_rate, 0.5)) / n;
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
             const std::size_t i = static_cast<std::size_t>(y) * w + x;
