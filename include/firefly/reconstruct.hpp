@@ -121,23 +121,18 @@ reconstruct_report reconstruct(const image_view<C>& color, const image_view<V>& 
                 reconstruct_scratch::kernel_class k{};
                 k.weight = std::exp(-(a * a + b * b) / (2.0 * o.sigma * o.sigma));
                 // Opposite pairs, in the order the summation tree expects.
-                int list[8][2];
-                if (a == 0) {  // (0, b): the axis class
-                    const int l[4][2] = {{0, b}, {0, -b}, {b, 0}, {-b, 0}};
-                    std::copy(&l[0][0], &l[0][0] + 8, &list[0][0]);
-                    k.count = 4;
+                auto add = [&k](int dx, int dy) {
+                    k.dx[k.count] = dx;
+                    k.dy[k.count] = dy;
+                    ++k.count;
+                };
+                if (a == 0) {  // the axis class (0, b)
+                    add(0, b), add(0, -b), add(b, 0), add(-b, 0);
                 } else if (a == b) {  // the diagonal class
-                    const int l[4][2] = {{a, a}, {-a, -a}, {-a, a}, {a, -a}};
-                    std::copy(&l[0][0], &l[0][0] + 8, &list[0][0]);
-                    k.count = 4;
+                    add(a, a), add(-a, -a), add(-a, a), add(a, -a);
                 } else {
-                    const int l[8][2] = {{a, b}, {-a, -b}, {-a, b}, {a, -b}, {b, a}, {-b, -a}, {-b, a}, {b, -a}};
-                    std::copy(&l[0][0], &l[0][0] + 16, &list[0][0]);
-                    k.count = 8;
-                }
-                for (int j = 0; j < k.count; ++j) {
-                    k.dx[j] = list[j][0];
-                    k.dy[j] = list[j][1];
+                    add(a, b), add(-a, -b), add(-a, b), add(a, -b);
+                    add(b, a), add(-b, -a), add(-b, a), add(b, -a);
                 }
                 s.classes_.push_back(k);
             }
@@ -146,6 +141,10 @@ reconstruct_report reconstruct(const image_view<C>& color, const image_view<V>& 
     }
 
     const std::size_t npix = color.pixel_count();
+    if (npix >= (std::size_t{1} << 32)) {
+        rep.error = status{errc::size_overflow, "reconstruct handles fewer than 2^32 pixels"};
+        return rep;
+    }
     s.state_.assign(npix, 0);
     s.list_.clear();
     {  // marked pixels are rare: test eight mask bytes at a time
