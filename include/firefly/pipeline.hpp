@@ -146,7 +146,6 @@ public:
         if (a.color.pixel_count() >= (std::size_t{1} << 32))
             return fail(rep, status{errc::size_overflow, "more than 2^32 pixels"});
 
-        const std::size_t n = a.color.pixel_count();
         const std::size_t lambdas_before = cache_.computed();
 
         // Stage 1 (parallel): standard deviations, bound, ESD candidates, per half.
@@ -154,7 +153,7 @@ public:
         // Stage 2 (serial): the ESD decision, reading and filling the shared lambda cache.
         for (int h = 0; h < 2; ++h) decide(halves_[h], rep.half[h]);
         // Stage 3: the highlight check across halves.
-        check_highlights(a, b, n, rep);
+        check_highlights(a, b, rep);
         // Stage 4 (parallel): reconstruction, masks.
         exec_.run(2, [&](std::size_t h) { finish(*hb[h], halves_[h], *masks[h], rep.half[h]); });
 
@@ -281,9 +280,7 @@ private:
     }
 
     template <class T>
-    void check_highlights(const half_buffer<T>& a, const half_buffer<T>& b, std::size_t n,
-                          frame_report& rep) {
-        (void)n;
+    void check_highlights(const half_buffer<T>& a, const half_buffer<T>& b, frame_report& rep) {
         std::uint8_t* lab[2] = {halves_[0].label.data(), halves_[1].label.data()};
         // Outliers come from the two lists, not from a pass over the frame.
         std::vector<std::uint32_t>& pairs = pairs_;

@@ -5,7 +5,8 @@
 //                     blocks (error ~ (block + n/block) eps instead of n eps; the block
 //                     partition never depends on threads, so results are bit-reproducible)
 //   running_summary   Welford updates. add() is stable for any value; the detector only ever
-//                     ADDS values back (the largest last) and never subtracts one out.
+//                     ADDS values back (the largest last): removing a dominant value from
+//                     running sums cancels catastrophically, so there is no remove().
 //   select_pair       exact k-th and (k+1)-th smallest of n keys by a 4096-bucket histogram
 //                     on the float bits, then nth_element inside one bucket: two light
 //                     passes instead of a full nth_element over a copy.
@@ -51,19 +52,6 @@ public:
         const double delta = x - s_.mean;
         s_.mean += delta / static_cast<double>(s_.count);
         s_.m2 += delta * (x - s_.mean);
-    }
-    // Removing a value cancels catastrophically when it dominates the set; prefer building
-    // the small set first and adding the large values back. Kept for completeness.
-    void remove(double x) noexcept {
-        if (s_.count <= 1) {
-            s_ = summary{};
-            return;
-        }
-        const double delta = x - s_.mean;
-        --s_.count;
-        s_.mean -= delta / static_cast<double>(s_.count);
-        s_.m2 -= delta * (x - s_.mean);
-        if (s_.m2 < 0) s_.m2 = 0;
     }
     const summary& get() const noexcept { return s_; }
 

@@ -376,7 +376,8 @@ stddev_counts stddev_pass(const image_view<C>& color, const image_view<V>& varia
     const int nv = variance.channels() == 1 ? 1 : nc;
     const bool has_alpha = !alpha.empty();
     const std::size_t n = color.pixel_count();
-    std::size_t negative_n = 0;
+    std::size_t negative_n = 0, nonfinite_n = 0, ignored_n = 0;
+    std::size_t finished = 0;  // pixels whose roots and labels are already final
     bool done = false;
     if constexpr (std::is_same_v<std::remove_cv_t<C>, float> && std::is_same_v<std::remove_cv_t<V>, float> &&
                   std::is_same_v<std::remove_cv_t<A>, float>) {
@@ -386,25 +387,15 @@ stddev_counts stddev_pass(const image_view<C>& color, const image_view<V>& varia
         done = packed;
 #if defined(__SSE2__) || defined(_M_X64)
         if (packed && cc == 3 && vc == 3 && how == variance_reduction::mean) {
-            // Whole pass (root and labels included) by hand; the tail by the generic kernel.
-            std::size_t nf = 0, ig = 0;
-            const std::size_t head =
-                ap ? stddev_rgb_mean_sse2<true>(color.data(), variance.data(), ap, n, sd, label, negative_n, nf, ig)
-                   : stddev_rgb_mean_sse2<false>(color.data(), variance.data(), ap, n, sd, label, negative_n, nf, ig);
-            negative_n += stddev_packed<3, 3>(color.data() + 3 * head, variance.data() + 3 * head, ap ? ap + head : nullptr,
-                                              n - head, how, sd + head);
-            for (std::size_t i = head; i < n; ++i) {
-                label[i] = label_of(sd[i]);
-                nf += label[i] >> 1;
-                ig += label[i] & 1u;
-            }
-            sqrt_nonnegative(sd + head, n - head);
-            counts.valid = n - nf - ig;
-            counts.ignored = ig;
-            counts.nonfinite = nf;
-            counts.negative_variance = negative_n;
-            return counts;
-        }
+            // The first `finished` pixels by hand, roots and labels included; the tail by
+            // the generic kernel and the common finish below.
+            finished = ap ? stddev_rgb_mean_sse2<true>(color.data(), variance.data(), ap, n, sd, label, negative_n,
+                                                       nonfinite_n, ignored_n)
+                          : stddev_rgb_mean_sse2<false>(color.data(), variance.data(), ap, n, sd, label, negative_n,
+                                                        nonfinite_n, ignored_n);
+            negative_n += stddev_packed<3, 3>(color.data() + 3 * finished, variance.data() + 3 * finished,
+                                              ap ? ap + finished : nullptr, n - finished, how, sd + finished);
+        } else
 #endif
         if (packed && cc == 3 && vc == 3) negative_n = stddev_packed<3, 3>(color.data(), variance.data(), ap, n, how, sd);
         else if (packed && cc == 3 && vc == 1) negative_n = stddev_packed<3, 1>(color.data(), variance.data(), ap, n, how, sd);
@@ -448,26 +439,24 @@ stddev_counts stddev_pass(const image_view<C>& color, const image_view<V>& varia
             }
         }
     }
-    std::size_t cls_count[3] = {0, 0, 0};
     if constexpr (std::is_same_v<R, float>) {
         // Labels follow from the stored values; then the square roots.
-        std::size_t nf = 0, ig = 0;
-        for (std::size_t i = 0; i < n; ++i) {
+        for (std::size_t i = finished; i < n; ++i) {
             const std::uint8_t l = label_of(sd[i]);
             label[i] = l;
-            nf += l >> 1;
-            ig += l & 1u;
+            nonfinite_n += l >> 1;
+            ignored_n += l & 1u;
         }
-        cls_count[0] = n - nf - ig;
-        cls_count[1] = ig;
-        cls_count[2] = nf;
-        sqrt_nonnegative(sd, n);
+        sqrt_nonnegative(sd + finished, n - finished);
     } else {
-        for (std::size_t i = 0; i < n; ++i) ++cls_count[label[i] & 3];
+        for (std::size_t i = 0; i < n; ++i) {
+            nonfinite_n += (label[i] & 3) == 2;
+            ignored_n += (label[i] & 3) == 1;
+        }
     }
-    counts.valid = cls_count[0];
-    counts.ignored = cls_count[1];
-    counts.nonfinite = cls_count[2];
+    counts.valid = n - nonfinite_n - ignored_n;
+    counts.ignored = ignored_n;
+    counts.nonfinite = nonfinite_n;
     counts.negative_variance = negative_n;
     return counts;
 }
