@@ -40,7 +40,7 @@ public:
         firefly::half_buffer<float> ha, hb;
         if (!view(width, height, a, ha) || !view(width, height, b, hb)) return false;
         const firefly::frame_report r = detector_.process(ha, hb);
-        if (!r.error) {
+        if (!r.ok()) {
             std::fprintf(stderr, "firefly: %s\n", r.error.message());
             return false;
         }

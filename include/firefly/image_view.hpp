@@ -67,8 +67,8 @@ namespace detail {
 inline bool add_extent(std::ptrdiff_t& acc, std::ptrdiff_t count, std::ptrdiff_t stride) noexcept {
     if (count <= 1) return true;
     const std::ptrdiff_t max = std::numeric_limits<std::ptrdiff_t>::max();
+    if (stride == std::numeric_limits<std::ptrdiff_t>::min()) return false;  // before negating
     const std::ptrdiff_t s = stride < 0 ? -stride : stride;
-    if (stride == std::numeric_limits<std::ptrdiff_t>::min()) return false;
     if (s != 0 && (count - 1) > (max - acc) / s) return false;
     acc += (count - 1) * s;
     return true;
@@ -130,6 +130,10 @@ public:
             return status{errc::invalid_argument, "negative image size"};
         if (channels == 0 && width > 0 && height > 0)
             return status{errc::empty_image, "an image with pixels needs at least one channel"};
+        // A stride of PTRDIFF_MIN has no absolute value: refuse it before anything negates it.
+        constexpr std::ptrdiff_t lowest = std::numeric_limits<std::ptrdiff_t>::min();
+        if (pixel_stride == lowest || row_stride == lowest || channel_stride == lowest)
+            return status{errc::size_overflow, "a stride of PTRDIFF_MIN cannot be used"};
         const std::ptrdiff_t elem = static_cast<std::ptrdiff_t>(sizeof(T));
         if (channel_stride == auto_stride) channel_stride = elem;
         if (pixel_stride == auto_stride) {
@@ -289,6 +293,56 @@ auto make_pixel_view(P* pixels, int width, int height, std::ptrdiff_t row_stride
     return image_view<C>::create(reinterpret_cast<C*>(pixels), width, height, Traits::channels,
                                  static_cast<std::ptrdiff_t>(sizeof(P)), row_stride,
                                  static_cast<std::ptrdiff_t>(sizeof(C)));
+}
+
+// The bytes a view can touch: [first, last) as addresses. Empty views touch nothing.
+struct byte_extent {
+    std::uintptr_t first = 0, last = 0;
+    bool empty() const noexcept { return first == last; }
+};
+
+template <class T>
+byte_extent extent_of(const image_view<T>& v) noexcept {
+    if (v.empty()) return {};
+    const auto base = reinterpret_cast<std::uintptr_t>(v.data());
+    std::ptrdiff_t lo = 0, hi = 0;  // offsets of the lowest and highest element
+    auto span = [&](int count, std::ptrdiff_t stride) {
+        const std::ptrdiff_t reach = static_cast<std::ptrdiff_t>(count - 1) * stride;
+        (reach < 0 ? lo : hi) += reach;
+    };
+    span(v.width(), v.pixel_stride());
+    span(v.height(), v.row_stride());
+    span(v.channels(), v.channel_stride());
+    return {base + static_cast<std::uintptr_t>(lo), base + static_cast<std::uintptr_t>(hi) + sizeof(T)};
+}
+
+// Whether two views may share a byte. Exact for views whose extents are apart and for two
+// interleaved views with the same pixel and row strides (colour and variance as channels
+// [0, 3) and [3, 6) of one 6-channel image, the layout OpenImageIO gives for an EXR holding
+// both); any other interleaving of extents is taken as an overlap.
+template <class A, class B>
+bool views_may_overlap(const image_view<A>& a, const image_view<B>& b) noexcept {
+    const byte_extent ea = extent_of(a), eb = extent_of(b);
+    if (ea.empty() || eb.empty() || ea.last <= eb.first || eb.last <= ea.first) return false;
+    const std::ptrdiff_t ps = a.pixel_stride();
+    if (ps <= 0 || ps != b.pixel_stride() || a.row_stride() != b.row_stride() || a.row_stride() % ps != 0)
+        return true;
+    // Each view's pixel footprint [0, f) must lie within one pixel slot of ps bytes.
+    auto footprint = [](auto& v) -> std::ptrdiff_t {
+        using E = std::remove_reference_t<decltype(*v.data())>;
+        if (v.channel_stride() <= 0) return -1;
+        return static_cast<std::ptrdiff_t>(v.channels() - 1) * v.channel_stride() +
+               static_cast<std::ptrdiff_t>(sizeof(E));
+    };
+    const std::ptrdiff_t fa = footprint(a), fb = footprint(b);
+    if (fa < 0 || fb < 0 || fa > ps || fb > ps) return true;
+    // Both sit on one lattice of period ps: compare the footprints modulo ps.
+    const std::uintptr_t pa = reinterpret_cast<std::uintptr_t>(a.data());
+    const std::uintptr_t pb = reinterpret_cast<std::uintptr_t>(b.data());
+    const auto ups = static_cast<std::uintptr_t>(ps);
+    const auto d = static_cast<std::ptrdiff_t>(((pb % ups) + ups - (pa % ups)) % ups);  // b's start in a's slot
+    // a covers [0, fa); b covers [d, d + fb) and, wrapped, [d - ps, d + fb - ps).
+    return d < fa || d + fb > ps;
 }
 
 // Same width and height.

@@ -93,7 +93,10 @@ struct half_report {
 };
 
 struct [[nodiscard]] frame_report {
-    status error{};                     // set when the inputs or options are refused
+    // True when the frame was checked and every pixel that needed it was rebuilt.
+    bool ok() const noexcept { return error.ok(); }
+    status error{};                     // why not ok(): inputs or options refused, or pixels
+                                        // left without a usable source
     half_report half[2];
     std::size_t both_outliers = 0;      // pixels that are outliers in both halves
     double variance_calibration = 1.0;  // variance -> variance of the mean (highlight rule)
@@ -132,10 +135,12 @@ public:
         frame_report rep;
         const half_buffer<T>* hb[2] = {&a, &b};
         const image_view<std::uint8_t>* masks[2] = {&mask_a, &mask_b};
-        if (status st = check_options(options_); !st) return fail(rep, st);
+        if (status st = check_options(options_); !st.ok()) return fail(rep, st);
         for (int h = 0; h < 2; ++h) {
-            if (status st = check_half_views(hb[h]->color, hb[h]->variance, hb[h]->alpha); !st)
+            if (status st = check_half_views(hb[h]->color, hb[h]->variance, hb[h]->alpha); !st.ok())
                 return fail(rep, st);
+            if (hb[h]->color.channels() > 4)
+                return fail(rep, status{errc::channel_mismatch, "colour needs 1 to 4 channels"});
             if (!masks[h]->empty() && (!same_size(*masks[h], a.color) || masks[h]->channels() != 1))
                 return fail(rep, status{errc::size_mismatch, "a mask must be 1 channel, frame-sized"});
         }
@@ -145,6 +150,7 @@ public:
             return fail(rep, status{errc::channel_mismatch, "the two halves differ in channels"});
         if (a.color.pixel_count() >= (std::size_t{1} << 32))
             return fail(rep, status{errc::size_overflow, "more than 2^32 pixels"});
+        if (status st = check_no_aliasing(a, b, mask_a, mask_b); !st.ok()) return fail(rep, st);
 
         const std::size_t lambdas_before = cache_.computed();
 
@@ -182,6 +188,30 @@ private:
         std::size_t valid = 0;
         reconstruct_scratch recon;
     };
+
+    // Every view process() writes must be apart from every other view it reads or writes:
+    // the halves run on two threads, and a pixel read after it was rebuilt would change results.
+    template <class T>
+    static status check_no_aliasing(const half_buffer<T>& a, const half_buffer<T>& b,
+                                    const image_view<std::uint8_t>& ma, const image_view<std::uint8_t>& mb) {
+        const image_view<const T> written[4] = {a.color, a.variance, b.color, b.variance};
+        const image_view<const std::uint8_t> masks[2] = {ma, mb};
+        for (int i = 0; i < 4; ++i) {
+            for (int j = i + 1; j < 4; ++j)
+                if (views_may_overlap(written[i], written[j]))
+                    return status{errc::aliased_views, "colour and variance views of the two halves must not share memory"};
+            if (views_may_overlap(written[i], a.alpha) || views_may_overlap(written[i], b.alpha))
+                return status{errc::aliased_views, "an alpha view shares memory with a colour or variance view"};
+            for (const auto& m : masks)
+                if (views_may_overlap(written[i], m))
+                    return status{errc::aliased_views, "a mask shares memory with a colour or variance view"};
+        }
+        if (views_may_overlap(masks[0], masks[1]) || views_may_overlap(masks[0], a.alpha) ||
+            views_may_overlap(masks[0], b.alpha) || views_may_overlap(masks[1], a.alpha) ||
+            views_may_overlap(masks[1], b.alpha))
+            return status{errc::aliased_views, "the masks must not share memory with each other or with alpha"};
+        return ok_status();
+    }
 
     static frame_report& fail(frame_report& r, status st) {
         r.error = st;

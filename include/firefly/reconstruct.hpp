@@ -93,7 +93,7 @@ reconstruct_report reconstruct(const image_view<C>& color, const image_view<V>& 
     using ct = channel_traits<std::remove_cv_t<C>>;
     using vt = channel_traits<std::remove_cv_t<V>>;
     reconstruct_report rep;
-    if (status st = check_reconstruct_options(o); !st) {
+    if (status st = check_reconstruct_options(o); !st.ok()) {
         rep.error = st;
         return rep;
     }

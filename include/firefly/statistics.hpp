@@ -294,7 +294,7 @@ public:
     static std::uint32_t bucket(float v) noexcept {
         std::uint32_t bits;
         std::memcpy(&bits, &v, sizeof bits);
-        return bits >> 16;
+        return (bits & 0x7fffffffu) >> 16;  // -0 is 0: only zero can carry a sign here
     }
     static float lower_edge(std::uint32_t b) noexcept {
         const std::uint32_t bits = b << 16;

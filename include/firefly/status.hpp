@@ -16,6 +16,7 @@ enum class errc : int {
     channel_mismatch,     // a view has a channel count the call cannot use
     invalid_argument,     // an option out of its documented range
     no_valid_pixels,      // nothing to reconstruct from: every pixel is an outlier or ignored
+    aliased_views,        // two views share memory that one of them writes
 };
 
 // A readable name for an error code; never null.
@@ -30,12 +31,14 @@ constexpr const char* to_string(errc e) noexcept {
         case errc::channel_mismatch: return "wrong channel count";
         case errc::invalid_argument: return "invalid argument";
         case errc::no_valid_pixels: return "no valid pixel to reconstruct from";
+        case errc::aliased_views: return "views share memory";
     }
     return "unknown error";
 }
 
 // An error code and a message with static storage duration (a literal), so the status
-// is trivially copyable and never allocates.
+// is trivially copyable and never allocates. Test it with ok(): a status has no conversion
+// to bool, because "if (error)" meaning "if fine" reads backwards.
 class [[nodiscard]] status {
 public:
     constexpr status() noexcept = default;
@@ -43,7 +46,6 @@ public:
         : code_(code), message_(message ? message : to_string(code)) {}
 
     constexpr bool ok() const noexcept { return code_ == errc::ok; }
-    constexpr explicit operator bool() const noexcept { return ok(); }
     constexpr errc code() const noexcept { return code_; }
     constexpr const char* message() const noexcept { return message_; }
 

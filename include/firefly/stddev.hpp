@@ -126,8 +126,9 @@ inline R classify_pixel(const R (&c)[3], const R (&v)[3], R a, std::uint8_t& lab
     if (NC > 2) black &= c[2] == R(0);
     const bool covered = !HasAlpha || a > R(0);
     negative = (v[0] < R(0)) | (v[1] < R(0)) | (v[2] < R(0));
-    // max, not a branch: negative -> 0 (non-finite pixels are discarded anyway)
-    const R v0 = std::max(v[0], R(0)), v1 = std::max(v[1], R(0)), v2 = std::max(v[2], R(0));
+    // negative and -0 -> +0 (std::max(-0.0, 0.0) is -0.0, whose sign would reach the
+    // histogram); non-finite pixels are discarded anyway
+    const R v0 = v[0] > R(0) ? v[0] : R(0), v1 = v[1] > R(0) ? v[1] : R(0), v2 = v[2] > R(0) ? v[2] : R(0);
     R var;
     if (NV == 1) var = v0;
     else if (How == variance_reduction::max) var = std::max(v0, std::max(v1, v2));
@@ -340,9 +341,12 @@ std::size_t stddev_packed(const float* col, const float* var, const float* alpha
         const float* vp = var + i * VS;
         const float c1 = nc > 1 ? cp[1] : 0.0f, c2 = nc > 2 ? cp[2] : 0.0f;
         const float v1 = nv > 1 ? vp[1] : 0.0f, v2 = nv > 2 ? vp[2] : 0.0f;
+        // A 4th channel is no colour, but NaN or Inf in it makes the pixel non-finite:
+        // x - x is 0 for finite x and NaN otherwise, and folds into channel 0 at no cost.
+        const float c0 = CS > 3 ? cp[0] + (cp[3] - cp[3]) : cp[0];
+        const float v0 = VS > 3 ? vp[0] + (vp[3] - vp[3]) : vp[0];
         std::uint32_t negative;
-        sd[i] = classify_bits<How, nc, nv, HasAlpha>(cp[0], c1, c2, vp[0], v1, v2, HasAlpha ? alpha[i] : 1.0f,
-                                                     negative);
+        sd[i] = classify_bits<How, nc, nv, HasAlpha>(c0, c1, c2, v0, v1, v2, HasAlpha ? alpha[i] : 1.0f, negative);
         negative_n += negative;
     }
     return negative_n;
@@ -374,6 +378,7 @@ stddev_counts stddev_pass(const image_view<C>& color, const image_view<V>& varia
     const int w = color.width(), h = color.height();
     const int nc = colour_channels(color.channels());
     const int nv = variance.channels() == 1 ? 1 : nc;
+    const int cc = color.channels(), vc = variance.channels();
     const bool has_alpha = !alpha.empty();
     const std::size_t n = color.pixel_count();
     std::size_t negative_n = 0, nonfinite_n = 0, ignored_n = 0;
@@ -382,7 +387,6 @@ stddev_counts stddev_pass(const image_view<C>& color, const image_view<V>& varia
     if constexpr (std::is_same_v<std::remove_cv_t<C>, float> && std::is_same_v<std::remove_cv_t<V>, float> &&
                   std::is_same_v<std::remove_cv_t<A>, float>) {
         const bool packed = color.is_packed() && variance.is_packed() && (!has_alpha || alpha.is_packed());
-        const int cc = color.channels(), vc = variance.channels();
         const float* ap = has_alpha ? alpha.data() : nullptr;
         done = packed;
 #if defined(__SSE2__) || defined(_M_X64)
@@ -421,6 +425,14 @@ stddev_counts stddev_pass(const image_view<C>& color, const image_view<V>& varia
                 R c[3] = {0, 0, 0}, v[3] = {0, 0, 0};
                 for (int k = 0; k < nc; ++k) c[k] = static_cast<R>(ct::load(cp[k * cs.c]));
                 for (int k = 0; k < nv; ++k) v[k] = static_cast<R>(vt::load(vp[k * vs.c]));
+                for (int k = 3; k < cc; ++k) {  // beyond colour: only finiteness counts (as packed)
+                    const R e = static_cast<R>(ct::load(cp[k * cs.c]));
+                    c[0] += e - e;
+                }
+                for (int k = 3; k < vc; ++k) {
+                    const R e = static_cast<R>(vt::load(vp[k * vs.c]));
+                    v[0] += e - e;
+                }
                 const R a = has_alpha ? static_cast<R>(at::load(arow[x * as.x])) : R(1);
                 bool negative = false;
                 std::uint8_t& l = label[base + static_cast<std::size_t>(x)];
