@@ -1,0 +1,322 @@
+// firefly Python module: numpy half buffers cleaned in place, with no copy.
+//
+// Arrays are wrapped in image_views with numpy's own byte strides (any layout numpy can
+// describe, e.g. px[..., :3] and px[..., 3:6] of one (H, W, 6) array). The library returns
+// errors as values; this file turns them into Python exceptions: ValueError for sizes,
+// channels and options, TypeError for a wrong type, dtype or a read-only array. The GIL is
+// released while a frame is processed.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+
+#include <climits>
+#include <cstdint>
+#include <limits>
+#include <mutex>
+#include <string>
+#include <type_traits>
+
+#include <firefly/version.hpp>
+
+#include "firefly_tables.hpp"
+
+namespace py = pybind11;
+using firefly::detector_options;
+using firefly::frame_report;
+using firefly::half_report;
+using firefly::image_view;
+using firefly::status;
+
+namespace {
+
+#define FIREFLY_PY_STR2(x) #x
+#define FIREFLY_PY_STR(x) FIREFLY_PY_STR2(x)
+constexpr const char* version_string = FIREFLY_PY_STR(FIREFLY_VERSION_MAJOR) "." FIREFLY_PY_STR(
+    FIREFLY_VERSION_MINOR) "." FIREFLY_PY_STR(FIREFLY_VERSION_PATCH);
+
+// ---------------------------------------------------------------------------------------
+// Options: Python values to option members and back.
+
+template <class E>
+std::string enum_choices() {
+    std::string s;
+    for (const auto& nv : firefly_py::enum_names<E>::values) s += (s.empty() ? "'" : ", '") + std::string(nv.first) + "'";
+    return s;
+}
+
+template <class T>
+T option_from_python(const std::string& name, py::handle v) {
+    const bool is_bool = PyBool_Check(v.ptr());
+    if constexpr (std::is_enum_v<T>) {
+        if (!py::isinstance<py::str>(v)) throw py::type_error(name + " must be a string: one of " + enum_choices<T>());
+        const std::string s = v.cast<std::string>();
+        for (const auto& nv : firefly_py::enum_names<T>::values)
+            if (s == nv.first) return nv.second;
+        throw py::value_error(name + " must be one of " + enum_choices<T>() + ", not '" + s + "'");
+    } else if constexpr (std::is_same_v<T, bool>) {
+        if (!is_bool) throw py::type_error(name + " must be True or False");
+        return v.cast<bool>();
+    } else if constexpr (std::is_integral_v<T>) {
+        if (is_bool || !PyIndex_Check(v.ptr())) throw py::type_error(name + " must be an integer");
+        const long long x = py::int_(py::reinterpret_borrow<py::object>(v)).cast<long long>();
+        if (x < std::numeric_limits<T>::min() || x > std::numeric_limits<T>::max())
+            throw py::value_error(name + " is out of range");
+        return static_cast<T>(x);
+    } else {
+        if (is_bool || !PyNumber_Check(v.ptr()) || py::isinstance<py::str>(v))
+            throw py::type_error(name + " must be a number");
+        return static_cast<T>(py::float_(py::reinterpret_borrow<py::object>(v)).cast<double>());
+    }
+}
+
+template <class T>
+py::object option_to_python(const T& v) {
+    if constexpr (std::is_enum_v<T>) {
+        return py::str(firefly_py::enum_name(v));
+    } else {
+        return py::cast(v);
+    }
+}
+
+detector_options options_from_kwargs(const py::kwargs& kw) {
+    detector_options o;
+    std::size_t used = 0;
+    firefly_py::for_each_option([&](const char* name, auto get) {
+        if (!kw.contains(name)) return;
+        auto& member = get(o);
+        member = option_from_python<std::remove_reference_t<decltype(member)>>(name, kw[name]);
+        ++used;
+    });
+    if (used != kw.size())
+        for (const auto& item : kw) {
+            bool known = false;
+            firefly_py::for_each_option([&](const char* name, auto) { known |= item.first.cast<std::string>() == name; });
+            if (!known)
+                throw py::type_error("Detector() got an unexpected keyword argument '" + item.first.cast<std::string>() + "'");
+        }
+    if (const status st = firefly::check_options(o); !st.ok()) throw py::value_error(st.message());
+    return o;
+}
+
+py::dict options_to_dict(detector_options o) {
+    py::dict d;
+    firefly_py::for_each_option([&](const char* name, auto get) { d[name] = option_to_python(get(o)); });
+    return d;
+}
+
+// ---------------------------------------------------------------------------------------
+// Reports: attributes and plain Python values, from the field lists.
+
+py::dict status_to_dict(const status& s) {
+    py::dict d;
+    d["ok"] = s.ok();
+    const char* code = firefly_py::enum_name(s.code());
+    d["code"] = code ? py::str(code) : py::str(std::to_string(static_cast<int>(s.code())));
+    d["message"] = s.message();
+    return d;
+}
+
+template <class T>
+py::object field_to_python(const T& v) {
+    if constexpr (std::is_same_v<T, status>) {
+        return status_to_dict(v);
+    } else {
+        return py::cast(v);
+    }
+}
+
+py::dict half_to_dict(const half_report& h) {
+    py::dict d;
+    firefly_py::for_each_half_field([&](const char* name, auto member) { d[name] = field_to_python(h.*member); });
+    return d;
+}
+
+py::dict frame_to_dict(const frame_report& r) {
+    py::dict d;
+    firefly_py::for_each_frame_field([&](const char* name, auto member) { d[name] = field_to_python(r.*member); });
+    py::list halves;
+    halves.append(half_to_dict(r.half[0]));
+    halves.append(half_to_dict(r.half[1]));
+    d["half"] = halves;
+    return d;
+}
+
+std::string half_repr(const half_report& h) {
+    return "HalfReport(" + py::repr(half_to_dict(h)).cast<std::string>() + ")";
+}
+
+void bind_reports(py::module_& m) {
+    py::class_<status>(m, "Status", "A library status: ok, code (a name) and message.")
+        .def_property_readonly("ok", &status::ok)
+        .def_property_readonly("code", [](const status& s) { return status_to_dict(s)["code"]; })
+        .def_property_readonly("message", &status::message)
+        .def("as_dict", &status_to_dict)
+        .def("__repr__", [](const status& s) { return "Status(" + py::repr(status_to_dict(s)).cast<std::string>() + ")"; });
+
+    py::class_<half_report> half(m, "HalfReport", "What the detector found and did in one half buffer.");
+    firefly_py::for_each_half_field([&](const char* name, auto member) { half.def_readonly(name, member); });
+    half.def("as_dict", &half_to_dict, "The same fields as plain Python types.");
+    half.def("__repr__", &half_repr);
+
+    py::class_<frame_report> frame(m, "FrameReport", "The report of one frame: half[0], half[1] and the frame's fields.");
+    firefly_py::for_each_frame_field([&](const char* name, auto member) { frame.def_readonly(name, member); });
+    frame.def_property_readonly(
+        "half", [](const frame_report& r) { return py::make_tuple(r.half[0], r.half[1]); },
+        "The two half reports (A, B).");
+    frame.def("as_dict", &frame_to_dict, "The same fields as plain Python types (for json.dump).");
+    frame.def("__repr__", [](const frame_report& r) {
+        return "FrameReport(" + py::repr(frame_to_dict(r)).cast<std::string>() + ")";
+    });
+}
+
+// ---------------------------------------------------------------------------------------
+// Arrays to views.
+
+// The array behind an argument, or TypeError.
+py::array as_array(const char* name, py::handle obj) {
+    if (!py::isinstance<py::array>(obj))
+        throw py::type_error(std::string(name) + " must be a numpy array, not " +
+                             py::str(py::type::handle_of(obj).attr("__name__")).cast<std::string>());
+    return py::reinterpret_borrow<py::array>(obj);
+}
+
+int checked_extent(const char* name, py::ssize_t n) {
+    if (n > INT_MAX) throw py::value_error(std::string(name) + " is too large");
+    return static_cast<int>(n);
+}
+
+// A view of an (H, W, C) or (H, W) array of T with numpy's strides. `channels` lists the
+// accepted channel counts (a 2-D array has 1); `writable` requires a writeable array.
+template <class T>
+image_view<T> view_of(const char* name, const py::array& a, std::initializer_list<int> channels, const char* dtype_text) {
+    using V = std::remove_const_t<T>;
+    if (!py::isinstance<py::array_t<V>>(a))
+        throw py::type_error(std::string(name) + " must be " + dtype_text + ", not " + py::str(a.dtype()).cast<std::string>());
+    if (!std::is_const_v<T> && !a.writeable())
+        throw py::type_error(std::string(name) + " is read-only: firefly cleans it in place");
+    if (a.ndim() != 2 && a.ndim() != 3)
+        throw py::value_error(std::string(name) + " must have shape (H, W, C) or (H, W), not " +
+                              py::str(a.attr("shape")).cast<std::string>());
+    const int c = a.ndim() == 3 ? checked_extent(name, a.shape(2)) : 1;
+    bool accepted = false;
+    std::string list;
+    for (const int k : channels) {
+        accepted |= c == k;
+        list += (list.empty() ? "" : " or ") + std::to_string(k);
+    }
+    if (!accepted) throw py::value_error(std::string(name) + " must have " + list + " channels, not " + std::to_string(c));
+    // A zero stride means "packed" to create(); to numpy it means what it says (a broadcast
+    // array, every pixel in one place), which a writeable view must not be.
+    for (py::ssize_t k = 0; k < a.ndim(); ++k)
+        if (a.strides(k) == 0 && a.shape(k) > 1)
+            throw py::value_error(std::string(name) + ": strides make pixels or channels overlap");
+    T* data = static_cast<T*>(const_cast<void*>(a.data()));
+    auto v = image_view<T>::create(data, checked_extent(name, a.shape(1)), checked_extent(name, a.shape(0)), c,
+                                   a.strides(1), a.strides(0), a.ndim() == 3 ? a.strides(2) : firefly::auto_stride);
+    if (!v.ok()) throw py::value_error(std::string(name) + ": " + v.error().message());
+    return *v;
+}
+
+// ---------------------------------------------------------------------------------------
+// The detector.
+
+struct py_detector {
+    py_detector(const detector_options& o, int threads)
+        : det(o, firefly::executor::threads(static_cast<unsigned>(threads))), threads(threads) {}
+    firefly::detector det;
+    int threads;
+    std::mutex busy;  // one frame at a time per detector (it owns scratch memory)
+};
+
+struct process_args {
+    py::object a_color, a_variance, b_color, b_variance, a_alpha, b_alpha, a_mask, b_mask;
+};
+
+template <class T>
+firefly::half_buffer<T> half_of(const char* const names[3], py::handle color, py::handle variance, py::handle alpha,
+                                const char* dtype_text) {
+    firefly::half_buffer<T> h;
+    h.color = view_of<T>(names[0], as_array(names[0], color), {1, 2, 3, 4}, dtype_text);
+    h.variance = view_of<T>(names[1], as_array(names[1], variance), {1, 2, 3, 4}, dtype_text);
+    if (!alpha.is_none()) h.alpha = view_of<const T>(names[2], as_array(names[2], alpha), {1}, dtype_text);
+    return h;
+}
+
+image_view<std::uint8_t> mask_of(const char* name, py::handle mask) {
+    if (mask.is_none()) return {};
+    return view_of<std::uint8_t>(name, as_array(name, mask), {1}, "uint8");
+}
+
+template <class T>
+frame_report process_typed(py_detector& d, const process_args& p, const char* dtype_text) {
+    static const char* const names_a[3] = {"a_color", "a_variance", "a_alpha"};
+    static const char* const names_b[3] = {"b_color", "b_variance", "b_alpha"};
+    const auto a = half_of<T>(names_a, p.a_color, p.a_variance, p.a_alpha, dtype_text);
+    const auto b = half_of<T>(names_b, p.b_color, p.b_variance, p.b_alpha, dtype_text);
+    const auto ma = mask_of("a_mask", p.a_mask), mb = mask_of("b_mask", p.b_mask);
+    frame_report r;
+    {
+        py::gil_scoped_release release;
+        std::lock_guard<std::mutex> lock(d.busy);
+        r = d.det.process(a, b, ma, mb);
+    }
+    if (!r.error.ok()) throw py::value_error(r.error.message());
+    return r;
+}
+
+frame_report process(py_detector& d, const process_args& p) {
+    const py::array a = as_array("a_color", p.a_color);
+    if (py::isinstance<py::array_t<float>>(a)) return process_typed<float>(d, p, "float32 (like a_color)");
+    if (py::isinstance<py::array_t<double>>(a)) return process_typed<double>(d, p, "float64 (like a_color)");
+    throw py::type_error("a_color must be float32 or float64, not " + py::str(a.dtype()).cast<std::string>());
+}
+
+std::string detector_doc() {
+    std::string s =
+        "Detector(*, threads=1, **options)\n\n"
+        "Finds and removes fireflies using the two half buffers of a frame. Keep one per stream of\n"
+        "frames: it caches Student-t points and scratch memory across frames. threads: up to this\n"
+        "many threads per frame (the two halves run in parallel). Options (keyword: default):\n";
+    const detector_options o;
+    for (auto item : options_to_dict(o)) s += "  " + item.first.cast<std::string>() + "=" + py::repr(item.second).cast<std::string>() + "\n";
+    return s;
+}
+
+const char* process_doc =
+    "process(a_color, a_variance, b_color, b_variance, a_alpha=None, b_alpha=None, a_mask=None, b_mask=None)\n\n"
+    "Cleans both half buffers in place and returns a FrameReport. Arrays: float32 or float64 (all\n"
+    "the same), shape (H, W, C), any strides; colour and variance writeable, variance with 1\n"
+    "channel or as many as colour; alpha (H, W) or (H, W, 1); masks uint8 (H, W), writeable,\n"
+    "receive MASK_* bits per pixel. ValueError for sizes, channels and options, TypeError for a\n"
+    "non-array, a wrong dtype or a read-only array. The GIL is released while the frame is processed.";
+
+void bind_detector(py::module_& m) {
+    py::class_<py_detector>(m, "Detector", detector_doc().c_str())
+        .def(py::init([](int threads, const py::kwargs& kw) {
+                 if (threads < 1) throw py::value_error("threads must be >= 1");
+                 return new py_detector(options_from_kwargs(kw), threads);
+             }),
+             py::kw_only(), py::arg("threads") = 1)
+        .def_property_readonly("options", [](const py_detector& d) { return options_to_dict(d.det.options()); },
+                               "The options, as a dict of keyword: value.")
+        .def_property_readonly("threads", [](const py_detector& d) { return d.threads; })
+        .def(
+            "process",
+            [](py_detector& d, py::object ac, py::object av, py::object bc, py::object bv, py::object aa, py::object ba,
+               py::object am, py::object bm) { return process(d, process_args{ac, av, bc, bv, aa, ba, am, bm}); },
+            process_doc, py::arg("a_color"), py::arg("a_variance"), py::arg("b_color"), py::arg("b_variance"),
+            py::arg("a_alpha") = py::none(), py::arg("b_alpha") = py::none(), py::arg("a_mask") = py::none(),
+            py::arg("b_mask") = py::none());
+}
+
+}  // namespace
+
+PYBIND11_MODULE(firefly, m) {
+    m.doc() = "firefly: removes fireflies from Monte Carlo renders using two half buffers (numpy, in place).";
+    m.attr("__version__") = version_string;
+    m.attr("MASK_FIREFLY") = firefly::mask_bits::firefly;
+    m.attr("MASK_HIGHLIGHT") = firefly::mask_bits::highlight;
+    m.attr("MASK_NONFINITE") = firefly::mask_bits::nonfinite;
+    m.attr("MASK_CONSISTENT") = firefly::mask_bits::consistent;
+    bind_reports(m);
+    bind_detector(m);
+}

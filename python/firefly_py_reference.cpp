@@ -1,0 +1,146 @@
+// The C++ side of the Python module's round-trip test: cleans raw half buffers with the
+// library directly and prints the report, so the test can compare the module bit for bit.
+//
+//   firefly_py_reference DTYPE WIDTH HEIGHT COLOR_CHANNELS VARIANCE_CHANNELS DIR [name=value ...]
+//
+// DTYPE is f4 or f8. DIR holds packed, C-order raw arrays a_color, a_variance, b_color,
+// b_variance, and optionally a_alpha and b_alpha; the cleaned colour and variance are written
+// back in place and the masks to a_mask and b_mask. Options are the module's keywords
+// (firefly_tables.hpp) plus threads=N. The report goes to stdout, one "name value" per line
+// ("a.fireflies 12"). Errors go to stderr with exit status 1.
+#include <cerrno>
+#include <cinttypes>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "firefly_tables.hpp"
+
+namespace {
+
+using firefly::detector_options;
+
+bool read_file(const std::string& path, std::vector<unsigned char>& out, std::size_t bytes) {
+    std::FILE* f = std::fopen(path.c_str(), "rb");
+    if (!f) return false;
+    out.resize(bytes);
+    const bool ok = std::fread(out.data(), 1, bytes, f) == bytes && std::fgetc(f) == EOF;
+    std::fclose(f);
+    return ok;
+}
+
+bool write_file(const std::string& path, const void* data, std::size_t bytes) {
+    std::FILE* f = std::fopen(path.c_str(), "wb");
+    if (!f) return false;
+    const bool ok = std::fwrite(data, 1, bytes, f) == bytes;
+    return std::fclose(f) == 0 && ok;
+}
+
+template <class T>
+bool parse_value(const char* s, T& out) {
+    char* end = nullptr;
+    errno = 0;
+    if constexpr (std::is_enum_v<T>) {
+        for (const auto& nv : firefly_py::enum_names<T>::values)
+            if (std::strcmp(s, nv.first) == 0) {
+                out = nv.second;
+                return true;
+            }
+        return false;
+    } else if constexpr (std::is_same_v<T, bool>) {
+        out = std::strcmp(s, "True") == 0 || std::strcmp(s, "true") == 0 || std::strcmp(s, "1") == 0;
+        return out || std::strcmp(s, "False") == 0 || std::strcmp(s, "false") == 0 || std::strcmp(s, "0") == 0;
+    } else if constexpr (std::is_integral_v<T>) {
+        const long long v = std::strtoll(s, &end, 10);
+        out = static_cast<T>(v);
+        return *s && !*end && errno == 0 && static_cast<long long>(out) == v;
+    } else {
+        out = static_cast<T>(std::strtod(s, &end));  // strtod reads Python's repr() exactly
+        return *s && !*end;
+    }
+}
+
+// "name=value" into the options; false when the name or value is unknown.
+bool set_option(detector_options& o, const std::string& arg, int& threads) {
+    const std::size_t eq = arg.find('=');
+    if (eq == std::string::npos) return false;
+    const std::string name = arg.substr(0, eq);
+    const char* value = arg.c_str() + eq + 1;
+    if (name == "threads") return parse_value(value, threads);
+    bool found = false, ok = false;
+    firefly_py::for_each_option([&](const char* n, auto get) {
+        if (name != n) return;
+        found = true;
+        ok = parse_value(value, get(o));
+    });
+    return found && ok;
+}
+
+void print_value(const char* name, const firefly::status& s) { std::printf("%s %s\n", name, firefly_py::enum_name(s.code())); }
+void print_value(const char* name, double v) { std::printf("%s %.17g\n", name, v); }
+void print_value(const char* name, int v) { std::printf("%s %d\n", name, v); }
+void print_value(const char* name, std::size_t v) { std::printf("%s %zu\n", name, v); }
+
+void print_report(const firefly::frame_report& r) {
+    firefly_py::for_each_frame_field([&](const char* name, auto member) { print_value(name, r.*member); });
+    for (int h = 0; h < 2; ++h)
+        firefly_py::for_each_half_field([&](const char* name, auto member) {
+            print_value((std::string(h ? "b." : "a.") + name).c_str(), r.half[h].*member);
+        });
+}
+
+struct frame_spec {
+    int width = 0, height = 0, nc = 0, nv = 0;
+    std::string dir;
+};
+
+template <class T>
+int run(const frame_spec& s, const detector_options& o, int threads) {
+    const std::size_t n = static_cast<std::size_t>(s.width) * static_cast<std::size_t>(s.height);
+    const char* names[6] = {"a_color", "a_variance", "b_color", "b_variance", "a_alpha", "b_alpha"};
+    const std::size_t counts[6] = {n * s.nc, n * s.nv, n * s.nc, n * s.nv, n, n};
+    std::vector<unsigned char> data[6];
+    bool present[6] = {};
+    for (int i = 0; i < 6; ++i) {
+        present[i] = read_file(s.dir + "/" + names[i], data[i], counts[i] * sizeof(T));
+        if (!present[i] && i < 4) return std::fprintf(stderr, "cannot read %s/%s\n", s.dir.c_str(), names[i]), 1;
+    }
+    auto view = [&](int i, int channels) {
+        return *firefly::make_image_view(reinterpret_cast<T*>(data[i].data()), s.width, s.height, channels);
+    };
+    firefly::half_buffer<T> a{view(0, s.nc), view(1, s.nv), {}}, b{view(2, s.nc), view(3, s.nv), {}};
+    if (present[4]) a.alpha = view(4, 1);
+    if (present[5]) b.alpha = view(5, 1);
+    std::vector<std::uint8_t> mask[2] = {std::vector<std::uint8_t>(n), std::vector<std::uint8_t>(n)};
+    firefly::detector d(o, firefly::executor::threads(static_cast<unsigned>(threads)));
+    const firefly::frame_report r = d.process(a, b, *firefly::make_image_view(mask[0].data(), s.width, s.height),
+                                              *firefly::make_image_view(mask[1].data(), s.width, s.height));
+    if (!r.error.ok()) return std::fprintf(stderr, "%s\n", r.error.message()), 1;
+    for (int i = 0; i < 4; ++i)
+        if (!write_file(s.dir + "/" + names[i], data[i].data(), data[i].size())) return 1;
+    if (!write_file(s.dir + "/a_mask", mask[0].data(), n) || !write_file(s.dir + "/b_mask", mask[1].data(), n)) return 1;
+    print_report(r);
+    return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    if (argc < 7) {
+        std::fprintf(stderr, "usage: %s f4|f8 WIDTH HEIGHT COLOR_CHANNELS VARIANCE_CHANNELS DIR [name=value ...]\n", argv[0]);
+        return 2;
+    }
+    frame_spec s{std::atoi(argv[2]), std::atoi(argv[3]), std::atoi(argv[4]), std::atoi(argv[5]), argv[6]};
+    detector_options o;
+    int threads = 1;
+    for (int i = 7; i < argc; ++i)
+        if (!set_option(o, argv[i], threads)) return std::fprintf(stderr, "bad option: %s\n", argv[i]), 2;
+    const std::string dtype = argv[1];
+    if (dtype == "f4") return run<float>(s, o, threads);
+    if (dtype == "f8") return run<double>(s, o, threads);
+    std::fprintf(stderr, "dtype must be f4 or f8\n");
+    return 2;
+}

@@ -1,0 +1,120 @@
+// firefly Python module: every detector option and every report field, each listed once.
+// The module's keywords, attributes and as_dict(), and the reference program's arguments
+// and output, are all generated from these lists, so a new option or field is one line here.
+// No pybind11 in this header: the C++ reference program (firefly_py_reference) uses it too.
+#pragma once
+
+#include <cstddef>
+#include <utility>
+
+#include <firefly/pipeline.hpp>
+
+namespace firefly_py {
+
+// The names of an enum's values, spelt as the library's identifiers.
+template <class E>
+struct enum_names;
+
+template <>
+struct enum_names<firefly::highlight_rule> {
+    using E = firefly::highlight_rule;
+    static constexpr std::pair<const char*, E> values[] = {
+        {"same_pixel", E::same_pixel}, {"agree", E::agree}, {"confident", E::confident},
+        {"confident_and_agree", E::confident_and_agree}};
+};
+
+template <>
+struct enum_names<firefly::variance_reduction> {
+    using E = firefly::variance_reduction;
+    static constexpr std::pair<const char*, E> values[] = {
+        {"mean", E::mean}, {"luminance", E::luminance}, {"max", E::max}};
+};
+
+template <>
+struct enum_names<firefly::lambda_method> {
+    using E = firefly::lambda_method;
+    static constexpr std::pair<const char*, E> values[] = {
+        {"exact", E::exact}, {"hill", E::hill}, {"normal", E::normal}};
+};
+
+template <>
+struct enum_names<firefly::errc> {
+    using E = firefly::errc;
+    static constexpr std::pair<const char*, E> values[] = {
+        {"ok", E::ok},
+        {"null_data", E::null_data},
+        {"empty_image", E::empty_image},
+        {"bad_stride", E::bad_stride},
+        {"size_overflow", E::size_overflow},
+        {"size_mismatch", E::size_mismatch},
+        {"channel_mismatch", E::channel_mismatch},
+        {"invalid_argument", E::invalid_argument},
+        {"no_valid_pixels", E::no_valid_pixels}};
+};
+
+// The name of an enum value; nullptr when the list above misses it.
+template <class E>
+const char* enum_name(E e) noexcept {
+    for (const auto& nv : enum_names<E>::values)
+        if (nv.second == e) return nv.first;
+    return nullptr;
+}
+
+// Every detector_options member, by its flattened keyword (the member's own name; the
+// highlight rule is `highlight_rule`, as `rule` alone says nothing). f(name, get) where
+// get(options) returns a reference to the member.
+template <class F>
+void for_each_option(F&& f) {
+    using O = firefly::detector_options;
+    f("alpha", [](O& o) -> auto& { return o.alpha; });
+    f("bound_threshold", [](O& o) -> auto& { return o.bound_threshold; });
+    f("reduction", [](O& o) -> auto& { return o.reduction; });
+    f("lambdas", [](O& o) -> auto& { return o.lambdas; });
+    f("highlight_rule", [](O& o) -> auto& { return o.highlight.rule; });
+    f("max_ratio", [](O& o) -> auto& { return o.highlight.max_ratio; });
+    f("max_relative_error", [](O& o) -> auto& { return o.highlight.max_relative_error; });
+    f("min_excess_z", [](O& o) -> auto& { return o.highlight.min_excess_z; });
+    f("cluster_relative_error", [](O& o) -> auto& { return o.highlight.cluster_relative_error; });
+    f("kernel_width", [](O& o) -> auto& { return o.reconstruction.kernel_width; });
+    f("sigma", [](O& o) -> auto& { return o.reconstruction.sigma; });
+    f("tolerance", [](O& o) -> auto& { return o.reconstruction.tolerance; });
+    f("max_iterations", [](O& o) -> auto& { return o.reconstruction.max_iterations; });
+    f("reconstruct", [](O& o) -> auto& { return o.reconstruct; });
+}
+
+// Every half_report field: f(name, member pointer).
+template <class F>
+void for_each_half_field(F&& f) {
+    using H = firefly::half_report;
+    f("pixels", &H::pixels);
+    f("valid", &H::valid);
+    f("ignored", &H::ignored);
+    f("nonfinite", &H::nonfinite);
+    f("negative_variance", &H::negative_variance);
+    f("median", &H::median);
+    f("mad", &H::mad);
+    f("bound", &H::bound);
+    f("outliers", &H::outliers);
+    f("highlights", &H::highlights);
+    f("consistent", &H::consistent);
+    f("fireflies", &H::fireflies);
+    f("repaired", &H::repaired);
+    f("phase1_rounds", &H::phase1_rounds);
+    f("phase2_iterations", &H::phase2_iterations);
+    f("final_change", &H::final_change);
+    f("reconstruction", &H::reconstruction);
+}
+
+// Every frame_report field but `half` (the two half reports, listed above): f(name, member
+// pointer).
+template <class F>
+void for_each_frame_field(F&& f) {
+    using R = firefly::frame_report;
+    f("error", &R::error);
+    f("both_outliers", &R::both_outliers);
+    f("variance_calibration", &R::variance_calibration);
+    f("lambdas_computed", &R::lambdas_computed);
+    f("scratch_bytes", &R::scratch_bytes);
+}
+
+}  // namespace firefly_py
