@@ -5,109 +5,37 @@
 //
 // Reads the two half buffers of a frame (colour R,G,B and variance Variance.R/G/B, the names
 // pbrt-v4 and Blender write; optional alpha A), cleans them with firefly::detector and writes
-// the combined image (A + B) / 2 with the variance of that mean. Every output is written under
-// a temporary name and renamed when complete, so a failure never leaves a partial file.
+// the combined image (A + B) / 2 with the variance of that mean.
+//
+// Outputs: all files of a frame (-o, --halves, --masks, --preview; and --report for a single
+// frame) are written to exclusive temporaries and renamed only when all are complete, so a
+// failure leaves none of them. An output that is an input, by file identity, is refused
+// before anything is written. A sequence goes on past a bad frame, records it in the report
+// and exits 1 at the end.
 #include <firefly/firefly.hpp>
 
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
-#include <cstring>
+#include <limits>
+#include <map>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
+#include "cli_options.hpp"
 #include "image_io.hpp"
+#include "output_files.hpp"
 
 using namespace firefly;
+using firefly_cli::options;
 using firefly_tools::image;
+using json = nlohmann::ordered_json;
 
 namespace {
 
-const char* usage_text =
-    "usage: firefly [options] HALF_A HALF_B -o OUTPUT\n"
-    "\n"
-    "Removes fireflies from a Monte Carlo render given as two half buffers (each holding half\n"
-    "of every pixel's samples) with per-pixel variance, and writes the combined image.\n"
-    "\n"
-    "inputs\n"
-    "  HALF_A HALF_B            OpenEXR files, one per half: colour and variance channels\n"
-    "                           (PFM colour files work too, with --variance-a/--variance-b)\n"
-    "  --channels R,G,B         colour channel names                  (default R,G,B)\n"
-    "  --variance Variance.R,Variance.G,Variance.B\n"
-    "                           variance channel names (1 or 3)       (default as shown)\n"
-    "  --alpha-channel A        alpha channel; used when present      (default A)\n"
-    "  --no-alpha               ignore alpha even when present\n"
-    "  --variance-a FILE, --variance-b FILE\n"
-    "                           variance PFM files for PFM colour inputs\n"
-    "  --frames FIRST-LAST[:STEP]  frame sequence: '#' runs in every path become the frame\n"
-    "                           number, zero-padded to the run's length\n"
-    "\n"
-    "outputs\n"
-    "  -o, --output FILE        combined cleaned image (EXR: colour, Variance.*, alpha)\n"
-    "  --halves PREFIX          also write PREFIX_a.exr and PREFIX_b.exr (cleaned halves)\n"
-    "  --masks PREFIX           also write PREFIX_a.exr and PREFIX_b.exr with channels\n"
-    "                           firefly, highlight, consistent, nonfinite (0 or 1)\n"
-    "  --report FILE            JSON report: options, per-frame counts and timings\n"
-    "  --preview PREFIX         PNG previews PREFIX_before.png, PREFIX_after.png (sRGB)\n"
-    "  --exposure X             preview exposure multiplier [1]\n"
-    "  -q, --quiet              no progress lines\n"
-    "\n"
-    "detector options (defaults in brackets)\n"
-    "  --significance X         generalized ESD alpha [0.05]\n"
-    "  --bound X                modified Z-score threshold [3.5]\n"
-    "  --reduction mean|luminance|max   channel variances to one number [mean]\n"
-    "  --lambdas exact|hill|normal      Student-t method for the critical values [exact]\n"
-    "  --highlight-rule same_pixel|agree|confident|confident_and_agree  [confident]\n"
-    "  --max-relative-error X   confident rule threshold [0.5]\n"
-    "  --max-ratio X            agree rule factor [4]\n"
-    "  --min-excess-z X         one-half outliers must exceed the other half by X sd [4]; 0: off\n"
-    "  --cluster-relative-error X  confident rule bound for pixels next to another both-half\n"
-    "                           outlier (highlights are spatially coherent) [0.8]; 0: off\n"
-    "  --kernel N               reconstruction kernel width, odd [5]\n"
-    "  --sigma X                reconstruction Gaussian sigma [1]\n"
-    "  --tolerance X            phase 2 relative tolerance [1e-3]\n"
-    "  --iterations N           phase 2 iteration cap [20]\n"
-    "  --threads N              threads [1]; results are identical for any count\n"
-    "\n"
-    "  -h, --help               this text;  --version  the version\n";
-
-struct cli {
-    std::string in_a, in_b, out, halves, masks, report, preview;
-    float exposure = 1.0f;
-    std::string var_a, var_b;  // PFM variance files
-    std::vector<std::string> colour = {"R", "G", "B"};
-    std::vector<std::string> variance = {"Variance.R", "Variance.G", "Variance.B"};
-    std::string alpha = "A";
-    bool use_alpha = true, quiet = false;
-    bool sequence = false;
-    long first = 0, last = 0, step = 1;
-    detector_options o;
-    unsigned threads = 1;
-};
-
-bool ends_with(const std::string& s, const char* suffix) {
-    const std::size_t n = std::strlen(suffix);
-    if (s.size() < n) return false;
-    for (std::size_t i = 0; i < n; ++i)
-        if (std::tolower(static_cast<unsigned char>(s[s.size() - n + i])) != suffix[i]) return false;
-    return true;
-}
-
-std::vector<std::string> split(const std::string& s) {
-    std::vector<std::string> out;
-    std::size_t start = 0;
-    while (true) {
-        const std::size_t comma = s.find(',', start);
-        out.push_back(s.substr(start, comma - start));
-        if (comma == std::string::npos) break;
-        start = comma + 1;
-    }
-    return out;
-}
-
 // Replaces each run of '#' by the frame number, zero-padded to the run's length.
-std::string frame_path(const std::string& pattern, long frame) {
+std::string frame_path(const std::string& pattern, long long frame) {
     std::string out;
     for (std::size_t i = 0; i < pattern.size();) {
         if (pattern[i] != '#') {
@@ -116,190 +44,104 @@ std::string frame_path(const std::string& pattern, long frame) {
         }
         std::size_t j = i;
         while (j < pattern.size() && pattern[j] == '#') ++j;
-        char buf[32];
-        std::snprintf(buf, sizeof buf, "%0*ld", static_cast<int>(j - i), frame);
+        char buf[48];
+        std::snprintf(buf, sizeof buf, "%0*lld", static_cast<int>(std::min<std::size_t>(j - i, 20)), frame);
         out += buf;
         i = j;
     }
     return out;
 }
 
-bool parse_number(const char* s, double& v) {
-    char* end = nullptr;
-    v = std::strtod(s, &end);
-    return end != s && *end == '\0' && std::isfinite(v);
+// Every file name of one frame.
+struct frame_files {
+    std::string a, b, va, vb;                           // inputs (va, vb: PFM variance)
+    std::string out, halves[2], masks[2], preview[2];   // outputs; empty when not asked for
+};
+
+frame_files files_of(const options& c, long long frame) {
+    auto p = [&](const std::string& s) { return c.sequence ? frame_path(s, frame) : s; };
+    frame_files f{p(c.in_a), p(c.in_b), p(c.var_a), p(c.var_b), p(c.out), {}, {}, {}};
+    for (int i = 0; i < 2; ++i) {
+        if (!c.halves.empty()) f.halves[i] = p(c.halves) + (i ? "_b.exr" : "_a.exr");
+        if (!c.masks.empty()) f.masks[i] = p(c.masks) + (i ? "_b.exr" : "_a.exr");
+        if (!c.preview.empty()) f.preview[i] = p(c.preview) + (i ? "_after.png" : "_before.png");
+    }
+    return f;
 }
 
-// Returns an empty string or the complaint.
-std::string parse(int argc, char** argv, cli& c, bool& done) {
-    std::vector<std::string> positional;
-    for (int i = 1; i < argc; ++i) {
-        const std::string a = argv[i];
-        auto value = [&](std::string& v) -> bool {
-            if (i + 1 >= argc) return false;
-            v = argv[++i];
-            return true;
-        };
-        auto number = [&](double& v) -> bool {
-            std::string s;
-            return value(s) && parse_number(s.c_str(), v);
-        };
-        std::string s;
-        double d = 0;
-        if (a == "-h" || a == "--help") {
-            std::fputs(usage_text, stdout);
-            done = true;
-            return {};
-        } else if (a == "--version") {
-            std::printf("firefly %d.%d.%d\n", FIREFLY_VERSION_MAJOR, FIREFLY_VERSION_MINOR, FIREFLY_VERSION_PATCH);
-            done = true;
-            return {};
-        } else if (a == "-o" || a == "--output") {
-            if (!value(c.out)) return "-o needs a file name";
-        } else if (a == "--halves") {
-            if (!value(c.halves)) return "--halves needs a prefix";
-        } else if (a == "--masks") {
-            if (!value(c.masks)) return "--masks needs a prefix";
-        } else if (a == "--report") {
-            if (!value(c.report)) return "--report needs a file name";
-        } else if (a == "--preview") {
-            if (!value(c.preview)) return "--preview needs a prefix";
-            if (!firefly_tools::have_png()) return "--preview needs PNG support: rebuild with libpng-dev installed";
-        } else if (a == "--exposure") {
-            if (!number(d) || !(d > 0)) return "--exposure wants a positive number";
-            c.exposure = static_cast<float>(d);
-        } else if (a == "--variance-a") {
-            if (!value(c.var_a)) return "--variance-a needs a file name";
-        } else if (a == "--variance-b") {
-            if (!value(c.var_b)) return "--variance-b needs a file name";
-        } else if (a == "--channels") {
-            if (!value(s) || (c.colour = split(s)).size() != 3) return "--channels wants three names, e.g. R,G,B";
-        } else if (a == "--variance") {
-            if (!value(s)) return "--variance needs channel names";
-            c.variance = split(s);
-            if (c.variance.size() != 1 && c.variance.size() != 3) return "--variance wants one or three names";
-        } else if (a == "--alpha-channel") {
-            if (!value(c.alpha)) return "--alpha-channel needs a name";
-        } else if (a == "--no-alpha") {
-            c.use_alpha = false;
-        } else if (a == "-q" || a == "--quiet") {
-            c.quiet = true;
-        } else if (a == "--frames") {
-            if (!value(s)) return "--frames needs FIRST-LAST";
-            long f = 0, l = 0, st = 1;
-            const int got = std::sscanf(s.c_str(), "%ld-%ld:%ld", &f, &l, &st);
-            if (got < 2 || l < f || st < 1) return "--frames wants FIRST-LAST or FIRST-LAST:STEP with FIRST <= LAST";
-            c.sequence = true;
-            c.first = f;
-            c.last = l;
-            c.step = st;
-        } else if (a == "--significance") {
-            if (!number(d) || !(d > 0 && d < 1)) return "--significance wants a number in (0, 1)";
-            c.o.alpha = d;
-        } else if (a == "--bound") {
-            if (!number(d) || d < 0) return "--bound wants a number >= 0";
-            c.o.bound_threshold = d;
-        } else if (a == "--reduction") {
-            if (!value(s)) return "--reduction needs a value";
-            if (s == "mean") c.o.reduction = variance_reduction::mean;
-            else if (s == "luminance") c.o.reduction = variance_reduction::luminance;
-            else if (s == "max") c.o.reduction = variance_reduction::max;
-            else return "--reduction is mean, luminance or max";
-        } else if (a == "--lambdas") {
-            if (!value(s)) return "--lambdas needs a value";
-            if (s == "exact") c.o.lambdas = lambda_method::exact;
-            else if (s == "hill") c.o.lambdas = lambda_method::hill;
-            else if (s == "normal") c.o.lambdas = lambda_method::normal;
-            else return "--lambdas is exact, hill or normal";
-        } else if (a == "--highlight-rule") {
-            if (!value(s)) return "--highlight-rule needs a value";
-            if (s == "same_pixel") c.o.highlight.rule = highlight_rule::same_pixel;
-            else if (s == "agree") c.o.highlight.rule = highlight_rule::agree;
-            else if (s == "confident") c.o.highlight.rule = highlight_rule::confident;
-            else if (s == "confident_and_agree") c.o.highlight.rule = highlight_rule::confident_and_agree;
-            else return "--highlight-rule is same_pixel, agree, confident or confident_and_agree";
-        } else if (a == "--max-relative-error") {
-            if (!number(d) || d < 0) return "--max-relative-error wants a number >= 0";
-            c.o.highlight.max_relative_error = d;
-        } else if (a == "--max-ratio") {
-            if (!number(d) || d < 1) return "--max-ratio wants a number >= 1";
-            c.o.highlight.max_ratio = d;
-        } else if (a == "--min-excess-z") {
-            if (!number(d) || d < 0) return "--min-excess-z wants a number >= 0";
-            c.o.highlight.min_excess_z = d;
-        } else if (a == "--cluster-relative-error") {
-            if (!number(d) || d < 0) return "--cluster-relative-error wants a number >= 0";
-            c.o.highlight.cluster_relative_error = d;
-        } else if (a == "--kernel") {
-            if (!number(d) || d != std::floor(d)) return "--kernel wants an odd whole number";
-            c.o.reconstruction.kernel_width = static_cast<int>(d);
-        } else if (a == "--sigma") {
-            if (!number(d) || !(d > 0)) return "--sigma wants a positive number";
-            c.o.reconstruction.sigma = d;
-        } else if (a == "--tolerance") {
-            if (!number(d) || d < 0) return "--tolerance wants a number >= 0";
-            c.o.reconstruction.tolerance = d;
-        } else if (a == "--iterations") {
-            if (!number(d) || d < 0 || d != std::floor(d)) return "--iterations wants a whole number >= 0";
-            c.o.reconstruction.max_iterations = static_cast<int>(d);
-        } else if (a == "--threads") {
-            if (!number(d) || d < 1 || d > 256) return "--threads wants a number from 1 to 256";
-            c.threads = static_cast<unsigned>(d);
-        } else if (!a.empty() && a[0] == '-' && a.size() > 1) {
-            return "unknown option " + a + " (firefly --help lists them)";
-        } else {
-            positional.push_back(a);
+// Refuses, before anything is written, an output that is an input of any frame (same
+// device and inode, whatever the spelling), an output named twice in a frame, and a file
+// given as both halves.
+std::string check_files(const options& c) {
+    using firefly_tools::file_id;
+    const long long first = c.sequence ? c.first : 0, last = c.sequence ? c.last : 0;
+    std::vector<std::pair<file_id, std::string>> inputs;
+    auto find = [](const std::vector<std::pair<file_id, std::string>>& v, const file_id& id) -> const std::string* {
+        for (const auto& e : v)
+            if (e.first == id) return &e.second;
+        return nullptr;
+    };
+    for (long long fr = first; fr <= last; fr += c.step) {
+        const frame_files f = files_of(c, fr);
+        file_id ia, ib;
+        const bool ha = firefly_tools::identify(f.a, ia) && ia.leaf.empty();
+        const bool hb = firefly_tools::identify(f.b, ib) && ib.leaf.empty();
+        if (ha && hb && ia == ib) return "HALF_A and HALF_B are the same file (" + f.a + ", " + f.b + ")";
+        for (const std::string* p : {&f.a, &f.b, &f.va, &f.vb}) {
+            file_id id;
+            if (!p->empty() && firefly_tools::identify(*p, id) && id.leaf.empty()) inputs.push_back({id, *p});
         }
     }
-    if (positional.size() != 2) return "expected two inputs, HALF_A and HALF_B (firefly --help)";
-    if (c.out.empty()) return "no output: give -o FILE";
-    c.in_a = positional[0];
-    c.in_b = positional[1];
-    if (status st = check_options(c.o); !st) return std::string("bad option: ") + st.message();
-    const bool pfm = ends_with(c.in_a, ".pfm") || ends_with(c.in_b, ".pfm");
-    if (pfm && (c.var_a.empty() || c.var_b.empty()))
-        return "PFM inputs hold colour only: give --variance-a and --variance-b PFM files";
-    if (c.sequence && c.out.find('#') == std::string::npos)
-        return "--frames needs '#' in the output name too, e.g. clean.####.exr";
+    for (long long fr = first; fr <= last; fr += c.step) {
+        const frame_files f = files_of(c, fr);
+        std::vector<std::pair<file_id, std::string>> outs;
+        for (const std::string* p : {&f.out, &f.halves[0], &f.halves[1], &f.masks[0], &f.masks[1], &f.preview[0],
+                                     &f.preview[1], &c.report}) {
+            file_id id;
+            if (p->empty()) continue;
+            if (!firefly_tools::identify(*p, id)) continue;  // no such folder: the write will say so
+            if (const std::string* in = find(inputs, id)) return "output " + *p + " is the input " + *in + ": refused";
+            if (const std::string* o = find(outs, id)) return "outputs " + *o + " and " + *p + " are the same file";
+            outs.push_back({id, *p});
+        }
+    }
     return {};
 }
 
 struct half_data {
-    image img;       // colour (3) + variance (1 or 3) [+ alpha], interleaved
-    int nc = 3, nv = 3;
+    image img;  // colour (3) + variance (1 or 3) [+ alpha], interleaved
+    int nv = 3;
     bool has_alpha = false;
 };
 
-std::string read_half(const cli& c, const std::string& path, const std::string& var_path, half_data& h) {
-    if (ends_with(path, ".pfm")) {
-        firefly_tools::pfm_image col, var;
-        std::string e = firefly_tools::read_pfm(path, col);
-        if (!e.empty()) return e;
-        e = firefly_tools::read_pfm(var_path, var);
-        if (!e.empty()) return e;
-        if (col.channels != 3) return path + ": the colour PFM must have 3 channels";
-        if (var.width != col.width || var.height != col.height)
-            return var_path + ": variance and colour differ in size";
-        h.nc = 3;
-        h.nv = var.channels;
-        h.has_alpha = false;
-        h.img.width = col.width;
-        h.img.height = col.height;
-        h.img.channels = {"R", "G", "B"};
-        for (int k = 0; k < h.nv; ++k) h.img.channels.push_back(h.nv == 1 ? "Variance.Y" : std::string("Variance.") + "RGB"[k]);
-        const std::size_t np = static_cast<std::size_t>(col.width) * static_cast<std::size_t>(col.height);
-        const std::size_t stride = static_cast<std::size_t>(3 + h.nv);
-        h.img.pixels.resize(np * stride);
-        for (std::size_t i = 0; i < np; ++i) {
-            for (int k = 0; k < 3; ++k) h.img.pixels[i * stride + static_cast<std::size_t>(k)] = col.pixels[i * 3 + static_cast<std::size_t>(k)];
-            for (int k = 0; k < h.nv; ++k)
-                h.img.pixels[i * stride + 3 + static_cast<std::size_t>(k)] = var.pixels[i * static_cast<std::size_t>(h.nv) + static_cast<std::size_t>(k)];
-        }
-        return {};
+std::string read_pfm_half(const std::string& path, const std::string& var_path, half_data& h) {
+    firefly_tools::pfm_image col, var;
+    std::string e = firefly_tools::read_pfm(path, col);
+    if (e.empty()) e = firefly_tools::read_pfm(var_path, var);
+    if (!e.empty()) return e;
+    if (col.channels != 3) return path + ": the colour PFM must have 3 channels";
+    if (var.width != col.width || var.height != col.height) return var_path + ": variance and colour differ in size";
+    h.nv = var.channels;
+    h.has_alpha = false;
+    h.img = image{};
+    h.img.width = col.width;
+    h.img.height = col.height;
+    h.img.channels = {"R", "G", "B"};
+    for (int k = 0; k < h.nv; ++k) h.img.channels.push_back(h.nv == 1 ? "Variance.Y" : std::string("Variance.") + "RGB"[k]);
+    const std::size_t np = static_cast<std::size_t>(col.width) * static_cast<std::size_t>(col.height);
+    const std::size_t stride = static_cast<std::size_t>(3 + h.nv), nv = static_cast<std::size_t>(h.nv);
+    h.img.pixels.resize(np * stride);
+    for (std::size_t i = 0; i < np; ++i) {
+        for (std::size_t k = 0; k < 3; ++k) h.img.pixels[i * stride + k] = col.pixels[i * 3 + k];
+        for (std::size_t k = 0; k < nv; ++k) h.img.pixels[i * stride + 3 + k] = var.pixels[i * nv + k];
     }
+    return {};
+}
+
+std::string read_half(const options& c, const std::string& path, const std::string& var_path, half_data& h) {
+    if (firefly_cli::ends_with_ci(path, ".pfm")) return read_pfm_half(path, var_path, h);
     std::vector<std::string> names = c.colour;
     for (const auto& v : c.variance) names.push_back(v);
-    h.nc = 3;
     h.nv = static_cast<int>(c.variance.size());
     // Alpha when asked for and present: read with it; when the only complaint is a missing
     // channel, read again without it (a missing colour or variance channel is then reported).
@@ -317,247 +159,295 @@ std::string read_half(const cli& c, const std::string& path, const std::string& 
     return firefly_tools::read_exr(path, names, h.img);
 }
 
-// Writes to a temporary name in the same folder, then renames.
-std::string write_atomic(const std::string& path, const image& img) {
-    const std::string tmp = path + ".tmp";
-    const std::string e = firefly_tools::write_exr(tmp, img);
-    if (!e.empty()) {
-        std::remove(tmp.c_str());
-        return e;
-    }
-    if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-        std::remove(tmp.c_str());
-        return "cannot rename " + tmp + " to " + path;
-    }
-    return {};
+bool same_window(const firefly_tools::window& a, const firefly_tools::window& b) {
+    return a.min_x == b.min_x && a.min_y == b.min_y && a.max_x == b.max_x && a.max_y == b.max_y;
 }
-std::string write_text_atomic(const std::string& path, const std::string& text) {
-    const std::string tmp = path + ".tmp";
-    std::FILE* f = std::fopen(tmp.c_str(), "wb");
-    if (!f) return "cannot write " + tmp;
-    const bool ok = std::fwrite(text.data(), 1, text.size(), f) == text.size();
-    if (std::fclose(f) != 0 || !ok) {
-        std::remove(tmp.c_str());
-        return "write failed: " + tmp;
+
+// The halves must match in size, windows and channels; the messages say how they differ.
+std::string check_halves(const options& c, const frame_files& f, const half_data (&h)[2]) {
+    const image &a = h[0].img, &b = h[1].img;
+    if (a.width != b.width || a.height != b.height)
+        return "the halves differ in size: " + std::to_string(a.width) + "x" + std::to_string(a.height) + " and " +
+               std::to_string(b.width) + "x" + std::to_string(b.height);
+    if (!same_window(a.data_window, b.data_window) || !same_window(a.display_window, b.display_window))
+        return "the halves differ in data or display window";
+    if (h[0].has_alpha != h[1].has_alpha) {
+        const std::string& with = h[0].has_alpha ? f.a : f.b;
+        const std::string& without = h[0].has_alpha ? f.b : f.a;
+        return "alpha channel " + c.alpha + " is in " + with + " but not in " + without + " (--no-alpha ignores it)";
     }
-    if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-        std::remove(tmp.c_str());
-        return "cannot rename " + tmp + " to " + path;
-    }
+    if (h[0].nv != h[1].nv) return "the halves differ in variance channels";
     return {};
 }
 
-std::string json_string(const std::string& s) {
-    std::string o = "\"";
-    for (char ch : s) {
-        if (ch == '"' || ch == '\\') o += '\\', o += ch;
-        else if (static_cast<unsigned char>(ch) < 0x20) {
-            char buf[8];
-            std::snprintf(buf, sizeof buf, "\\u%04x", ch);
-            o += buf;
-        } else o += ch;
+// Views over an interleaved half: colour, variance, alpha.
+std::string views_of(half_data& h, half_buffer<float>& hb) {
+    const int w = h.img.width, ht = h.img.height;
+    const std::ptrdiff_t ps = static_cast<std::ptrdiff_t>(h.img.channel_count() * sizeof(float));
+    float* base = h.img.pixels.data();
+    auto col = image_view<float>::create(base, w, ht, 3, ps);
+    auto var = image_view<float>::create(base + 3, w, ht, h.nv, ps);
+    if (!col.ok() || !var.ok()) return "internal: bad image layout";
+    hb.color = *col;
+    hb.variance = *var;
+    if (h.has_alpha) {
+        auto al = image_view<const float>::create(base + 3 + h.nv, w, ht, 1, ps);
+        if (!al.ok()) return "internal: bad alpha layout";
+        hb.alpha = *al;
     }
-    return o + "\"";
+    return {};
 }
 
-const char* rule_name(highlight_rule r) {
-    switch (r) {
-        case highlight_rule::same_pixel: return "same_pixel";
-        case highlight_rule::agree: return "agree";
-        case highlight_rule::confident: return "confident";
-        default: return "confident_and_agree";
+// Combined image: (A + B) / 2, variance of the mean vA / 4 + vB / 4 (in double, held at
+// FLT_MAX: FLT_MAX inputs must not become Inf), alpha averaged.
+image combine(const half_data (&h)[2]) {
+    image comb;
+    comb.width = h[0].img.width;
+    comb.height = h[0].img.height;
+    comb.channels = h[0].img.channels;  // colour, variance [, alpha], as read
+    comb.data_window = h[0].img.data_window;
+    comb.display_window = h[0].img.display_window;
+    const std::size_t stride = comb.channels.size(), nv = static_cast<std::size_t>(h[0].nv);
+    const std::size_t np = static_cast<std::size_t>(comb.width) * static_cast<std::size_t>(comb.height);
+    comb.pixels.resize(np * stride);
+    const double fmax = std::numeric_limits<float>::max();
+    for (std::size_t i = 0; i < np; ++i) {
+        const float* a = &h[0].img.pixels[i * stride];
+        const float* b = &h[1].img.pixels[i * stride];
+        float* o = &comb.pixels[i * stride];
+        for (std::size_t k = 0; k < 3; ++k) o[k] = 0.5f * a[k] + 0.5f * b[k];
+        for (std::size_t k = 3; k < 3 + nv; ++k) {
+            const double v = 0.25 * a[k] + 0.25 * b[k];
+            o[k] = static_cast<float>(v > fmax ? fmax : v < -fmax ? -fmax : v);
+        }
+        if (h[0].has_alpha) o[3 + nv] = 0.5f * a[3 + nv] + 0.5f * b[3 + nv];
     }
+    return comb;
 }
 
-std::string half_json(const half_report& h) {
-    char buf[1024];
-    std::snprintf(buf, sizeof buf,
-                  "{\"pixels\": %zu, \"valid\": %zu, \"ignored\": %zu, \"nonfinite\": %zu, \"negative_variance\": %zu, "
-                  "\"median_sd\": %.9g, \"mad_sd\": %.9g, \"bound\": %zu, \"outliers\": %zu, \"highlights\": %zu, "
-                  "\"consistent\": %zu, \"fireflies\": %zu, \"repaired\": %zu, \"phase1_rounds\": %d, "
-                  "\"phase2_iterations\": %d, \"final_change\": %.6g}",
-                  h.pixels, h.valid, h.ignored, h.nonfinite, h.negative_variance, h.median, h.mad, h.bound, h.outliers,
-                  h.highlights, h.consistent, h.fireflies, h.repaired, h.phase1_rounds, h.phase2_iterations, h.final_change);
-    return buf;
+image mask_image(const std::vector<std::uint8_t>& mask, const image& like) {
+    image m;
+    m.width = like.width;
+    m.height = like.height;
+    m.data_window = like.data_window;
+    m.display_window = like.display_window;
+    m.channels = {"firefly", "highlight", "consistent", "nonfinite"};
+    m.pixels.resize(mask.size() * 4);
+    const std::uint8_t bits[4] = {mask_bits::firefly, mask_bits::highlight, mask_bits::consistent, mask_bits::nonfinite};
+    for (std::size_t k = 0; k < mask.size(); ++k)
+        for (std::size_t b = 0; b < 4; ++b) m.pixels[k * 4 + b] = (mask[k] & bits[b]) ? 1.0f : 0.0f;
+    return m;
+}
+
+std::string write_exr_to(firefly_tools::output_set& set, const std::string& path, const image& img) {
+    int fd = -1;
+    std::string e = set.open(path, fd);
+    if (!e.empty()) return e;
+    firefly_tools::fd_ostream os(fd, path);
+    return firefly_tools::write_exr(os, img);
+}
+
+std::string write_png_to(firefly_tools::output_set& set, const std::string& path, const float* rgb, int w, int h,
+                         std::size_t stride, float exposure) {
+    int fd = -1;
+    std::string e = set.open(path, fd);
+    if (!e.empty()) return e;
+    const int dup = ::dup(fd);
+    std::FILE* f = dup >= 0 ? ::fdopen(dup, "wb") : nullptr;
+    if (!f) {
+        if (dup >= 0) ::close(dup);
+        return "cannot write " + path;
+    }
+    e = firefly_tools::write_png_preview(f, path, rgb, w, h, stride, exposure);
+    if (std::fclose(f) != 0 && e.empty()) e = "write failed: " + path;
+    return e;
+}
+
+json half_json(const half_report& h) {
+    return json{{"pixels", h.pixels},       {"valid", h.valid},
+                {"ignored", h.ignored},     {"nonfinite", h.nonfinite},
+                {"negative_variance", h.negative_variance},
+                {"median_sd", h.median},    {"mad_sd", h.mad},
+                {"bound", h.bound},         {"outliers", h.outliers},
+                {"highlights", h.highlights}, {"consistent", h.consistent},
+                {"fireflies", h.fireflies}, {"repaired", h.repaired},
+                {"phase1_rounds", h.phase1_rounds}, {"phase2_iterations", h.phase2_iterations},
+                {"final_change", h.final_change}};
 }
 
 using clock_type = std::chrono::steady_clock;
-double ms_since(clock_type::time_point t) {
-    return std::chrono::duration<double, std::milli>(clock_type::now() - t).count();
-}
+double ms_since(clock_type::time_point t) { return std::chrono::duration<double, std::milli>(clock_type::now() - t).count(); }
 
-// One frame: read, clean, write. Returns an empty string or the error; json gets the record.
-std::string run_frame(const cli& c, detector& d, long frame, std::string& json) {
-    const std::string pa = c.sequence ? frame_path(c.in_a, frame) : c.in_a;
-    const std::string pb = c.sequence ? frame_path(c.in_b, frame) : c.in_b;
-    const std::string va = c.sequence ? frame_path(c.var_a, frame) : c.var_a;
-    const std::string vb = c.sequence ? frame_path(c.var_b, frame) : c.var_b;
-    const std::string out = c.sequence ? frame_path(c.out, frame) : c.out;
-    const auto t0 = clock_type::now();
-    half_data h[2];
-    std::string e = read_half(c, pa, va, h[0]);
-    if (e.empty()) e = read_half(c, pb, vb, h[1]);
-    if (!e.empty()) return e;
-    if (h[0].img.width != h[1].img.width || h[0].img.height != h[1].img.height) {
-        char buf[256];
-        std::snprintf(buf, sizeof buf, "the halves differ in size: %dx%d and %dx%d", h[0].img.width, h[0].img.height,
-                      h[1].img.width, h[1].img.height);
-        return buf;
-    }
-    if (h[0].nv != h[1].nv || h[0].has_alpha != h[1].has_alpha) return "the halves differ in channels";
-    const double read_ms = ms_since(t0);
+// One frame's result: the outputs (written to temporaries, not yet renamed), the report
+// record and the error, if any.
+struct frame_result {
+    firefly_tools::output_set outputs;
+    json record;
+    std::string error;
+};
+
+// Cleans a frame read into h[0], h[1] and writes its outputs to temporaries.
+std::string clean_frame(const options& c, detector& d, const frame_files& f, half_data (&h)[2], frame_result& fr) {
     const int w = h[0].img.width, ht = h[0].img.height;
+    const std::size_t np = static_cast<std::size_t>(w) * static_cast<std::size_t>(ht);
     half_buffer<float> hb[2];
-    for (int i = 0; i < 2; ++i) {
-        const std::ptrdiff_t ps = static_cast<std::ptrdiff_t>(h[i].img.channel_count() * sizeof(float));
-        float* base = h[i].img.pixels.data();
-        auto col = image_view<float>::create(base, w, ht, 3, ps);
-        auto var = image_view<float>::create(base + 3, w, ht, h[i].nv, ps);
-        if (!col || !var) return "internal: bad image layout";
-        hb[i].color = *col;
-        hb[i].variance = *var;
-        if (h[i].has_alpha) {
-            auto al = image_view<const float>::create(base + 3 + h[i].nv, w, ht, 1, ps);
-            if (!al) return "internal: bad alpha layout";
-            hb[i].alpha = *al;
-        }
-    }
+    for (int i = 0; i < 2; ++i)
+        if (std::string e = views_of(h[i], hb[i]); !e.empty()) return e;
     std::vector<std::uint8_t> mask[2];
     image_view<std::uint8_t> mv[2];
-    if (!c.masks.empty())
-        for (int i = 0; i < 2; ++i) {
-            mask[i].assign(static_cast<std::size_t>(w) * static_cast<std::size_t>(ht), 0);
-            mv[i] = *make_image_view(mask[i].data(), w, ht);
-        }
-    std::vector<float> before;  // the combined input, for the preview
-    if (!c.preview.empty()) {
-        before.resize(static_cast<std::size_t>(w) * static_cast<std::size_t>(ht) * 3);
-        const std::size_t st = h[0].img.channels.size();
-        for (std::size_t i = 0; i < before.size() / 3; ++i)
-            for (int k = 0; k < 3; ++k)
-                before[i * 3 + static_cast<std::size_t>(k)] = 0.5f * h[0].img.pixels[i * st + static_cast<std::size_t>(k)] +
-                                                                0.5f * h[1].img.pixels[i * st + static_cast<std::size_t>(k)];
+    for (int i = 0; i < 2 && !c.masks.empty(); ++i) {
+        mask[i].assign(np, 0);
+        mv[i] = *make_image_view(mask[i].data(), w, ht);
     }
+    image before;  // the combined input, for the preview
+    if (!c.preview.empty()) before = combine(h);
     const auto t1 = clock_type::now();
     const frame_report r = d.process(hb[0], hb[1], mv[0], mv[1]);
     const double process_ms = ms_since(t1);
-    if (!r.error) return std::string("cannot clean the frame: ") + r.error.message();
+    if (!r.error.ok() && r.error.code() == errc::no_valid_pixels)
+        return std::string("no valid pixel to rebuild from (every pixel is NaN/Inf, black or an outlier): ") +
+               r.error.message();
+    if (!r.error.ok()) return std::string("cannot clean the frame: ") + r.error.message();
     for (int i = 0; i < 2; ++i)
-        if (r.half[i].reconstruction.code() == errc::no_valid_pixels)
-            return std::string("half ") + "AB"[i] + " has no valid pixel to rebuild from (every pixel is NaN/Inf, black or an outlier)";
-
-    // Combined image: (A + B) / 2, variance of the mean (vA + vB) / 4, alpha averaged.
+        if (!r.half[i].reconstruction.ok())
+            return std::string("half ") + "AB"[i] +
+                   (r.half[i].reconstruction.code() == errc::no_valid_pixels
+                        ? " has no valid pixel to rebuild from (every pixel is NaN/Inf, black or an outlier)"
+                        : std::string(": reconstruction failed: ") + r.half[i].reconstruction.message());
     const auto t2 = clock_type::now();
-    image comb;
-    comb.width = w;
-    comb.height = ht;
-    comb.channels = h[0].img.channels;  // colour, variance [, alpha], as read
-    const std::size_t stride = comb.channels.size(), in_stride = h[0].img.channels.size();
-    comb.pixels.resize(static_cast<std::size_t>(w) * static_cast<std::size_t>(ht) * stride);
-    for (std::size_t i = 0; i < static_cast<std::size_t>(w) * static_cast<std::size_t>(ht); ++i) {
-        const float* a = &h[0].img.pixels[i * in_stride];
-        const float* b = &h[1].img.pixels[i * in_stride];
-        float* o = &comb.pixels[i * stride];
-        for (int k = 0; k < 3; ++k) o[k] = 0.5f * a[k] + 0.5f * b[k];
-        for (int k = 0; k < h[0].nv; ++k) o[3 + k] = 0.25f * (a[3 + k] + b[3 + k]);
-        if (h[0].has_alpha) o[3 + h[0].nv] = 0.5f * (a[3 + h[0].nv] + b[3 + h[0].nv]);
-    }
-    e = write_atomic(out, comb);
+    const image comb = combine(h);
+    // The main output is opened first so that it is renamed last.
+    std::string e = write_exr_to(fr.outputs, f.out, comb);
+    for (int i = 0; i < 2 && e.empty() && !c.halves.empty(); ++i) e = write_exr_to(fr.outputs, f.halves[i], h[i].img);
+    for (int i = 0; i < 2 && e.empty() && !c.masks.empty(); ++i)
+        e = write_exr_to(fr.outputs, f.masks[i], mask_image(mask[i], comb));
+    const std::size_t stride = comb.channels.size();
+    if (e.empty() && !c.preview.empty()) e = write_png_to(fr.outputs, f.preview[0], before.pixels.data(), w, ht, stride, c.exposure);
+    if (e.empty() && !c.preview.empty()) e = write_png_to(fr.outputs, f.preview[1], comb.pixels.data(), w, ht, stride, c.exposure);
+    if (e.empty()) e = fr.outputs.close_all();
     if (!e.empty()) return e;
-    for (int i = 0; i < 2 && !c.halves.empty(); ++i) {
-        const std::string p = (c.sequence ? frame_path(c.halves, frame) : c.halves) + (i ? "_b.exr" : "_a.exr");
-        e = write_atomic(p, h[i].img);
-        if (!e.empty()) return e;
-    }
-    for (int i = 0; i < 2 && !c.masks.empty(); ++i) {
-        const std::string p = (c.sequence ? frame_path(c.masks, frame) : c.masks) + (i ? "_b.exr" : "_a.exr");
-        image m;
-        m.width = w;
-        m.height = ht;
-        m.channels = {"firefly", "highlight", "consistent", "nonfinite"};
-        m.pixels.resize(static_cast<std::size_t>(w) * static_cast<std::size_t>(ht) * 4);
-        for (std::size_t k = 0; k < mask[i].size(); ++k) {
-            m.pixels[k * 4 + 0] = (mask[i][k] & mask_bits::firefly) ? 1.0f : 0.0f;
-            m.pixels[k * 4 + 1] = (mask[i][k] & mask_bits::highlight) ? 1.0f : 0.0f;
-            m.pixels[k * 4 + 2] = (mask[i][k] & mask_bits::consistent) ? 1.0f : 0.0f;
-            m.pixels[k * 4 + 3] = (mask[i][k] & mask_bits::nonfinite) ? 1.0f : 0.0f;
-        }
-        e = write_atomic(p, m);
-        if (!e.empty()) return e;
-    }
-    if (!c.preview.empty()) {
-        const std::string p = c.sequence ? frame_path(c.preview, frame) : c.preview;
-        e = firefly_tools::write_png_preview(p + "_before.png", before.data(), w, ht, 3, c.exposure);
-        if (e.empty()) e = firefly_tools::write_png_preview(p + "_after.png", comb.pixels.data(), w, ht, stride, c.exposure);
-        if (!e.empty()) return e;
-    }
-    const double write_ms = ms_since(t2);
-    char buf[512];
-    std::snprintf(buf, sizeof buf,
-                  "{\"frame\": %ld, \"half_a\": %s, \"half_b\": %s, \"output\": %s, \"width\": %d, \"height\": %d, "
-                  "\"both_outliers\": %zu, \"variance_calibration\": %.6g, \"lambdas_computed\": %zu, "
-                  "\"milliseconds\": {\"read\": %.2f, \"process\": %.2f, \"write\": %.2f}, ",
-                  frame, json_string(pa).c_str(), json_string(pb).c_str(), json_string(out).c_str(), w, ht,
-                  r.both_outliers, r.variance_calibration, r.lambdas_computed, read_ms, process_ms, write_ms);
-    json = std::string(buf) + "\"a\": " + half_json(r.half[0]) + ", \"b\": " + half_json(r.half[1]) + "}";
+    fr.record["width"] = w;
+    fr.record["height"] = ht;
+    fr.record["both_outliers"] = r.both_outliers;
+    fr.record["variance_calibration"] = r.variance_calibration;
+    fr.record["lambdas_computed"] = r.lambdas_computed;
+    fr.record["milliseconds"] = json{{"read", fr.record["milliseconds"]["read"]}, {"process", process_ms}, {"write", ms_since(t2)}};
+    fr.record["a"] = half_json(r.half[0]);
+    fr.record["b"] = half_json(r.half[1]);
     if (!c.quiet)
         std::printf("%s: %dx%d, fireflies %zu + %zu, highlights kept %zu, non-finite repaired %zu + %zu, %.1f ms\n",
-                    out.c_str(), w, ht, r.half[0].fireflies, r.half[1].fireflies, r.half[0].highlights,
+                    f.out.c_str(), w, ht, r.half[0].fireflies, r.half[1].fireflies, r.half[0].highlights,
                     r.half[0].repaired, r.half[1].repaired, process_ms);
     return {};
+}
+
+// One frame: read, check, clean, write to temporaries. fr.error is empty on success.
+void run_frame(const options& c, detector& d, long long frame, frame_result& fr) {
+    const frame_files f = files_of(c, frame);
+    fr.record = json{{"frame", frame}, {"half_a", f.a}, {"half_b", f.b}, {"output", f.out}};
+    const auto t0 = clock_type::now();
+    half_data h[2];
+    fr.error = read_half(c, f.a, f.va, h[0]);
+    if (fr.error.empty()) fr.error = read_half(c, f.b, f.vb, h[1]);
+    if (fr.error.empty()) fr.error = check_halves(c, f, h);
+    fr.record["milliseconds"]["read"] = ms_since(t0);
+    if (fr.error.empty()) fr.error = clean_frame(c, d, f, h, fr);
+    if (!fr.error.empty()) fr.outputs.discard();
+}
+
+json options_json(const options& c) {
+    static const char* reductions[] = {"mean", "luminance", "max"};
+    static const char* lambdas[] = {"exact", "hill", "normal"};
+    static const char* rules[] = {"same_pixel", "agree", "confident", "confident_and_agree"};
+    const auto& o = c.o;
+    return json{{"significance", o.alpha},
+                {"bound", o.bound_threshold},
+                {"reduction", reductions[static_cast<int>(o.reduction) % 3]},
+                {"lambdas", lambdas[static_cast<int>(o.lambdas) % 3]},
+                {"highlight_rule", rules[static_cast<int>(o.highlight.rule) % 4]},
+                {"max_relative_error", o.highlight.max_relative_error},
+                {"max_ratio", o.highlight.max_ratio},
+                {"min_excess_z", o.highlight.min_excess_z},
+                {"cluster_relative_error", o.highlight.cluster_relative_error},
+                {"kernel", o.reconstruction.kernel_width},
+                {"sigma", o.reconstruction.sigma},
+                {"tolerance", o.reconstruction.tolerance},
+                {"iterations", o.reconstruction.max_iterations},
+                {"threads", c.threads}};
+}
+
+// The report as text. Paths are not always UTF-8: invalid bytes become U+FFFD.
+std::string report_text(const options& c, const json& frames, std::size_t failed) {
+    const std::string version = std::to_string(FIREFLY_VERSION_MAJOR) + "." + std::to_string(FIREFLY_VERSION_MINOR) +
+                                "." + std::to_string(FIREFLY_VERSION_PATCH);
+    const json report{{"firefly", version},
+                      {"options", options_json(c)},
+                      {"frames", frames},
+                      {"frames_failed", failed},
+                      {"status", failed ? "failed" : "ok"}};
+    return report.dump(2, ' ', false, json::error_handler_t::replace) + "\n";
+}
+
+void complain(const options& c, long long frame, const std::string& e) {
+    if (c.sequence) std::fprintf(stderr, "firefly: frame %lld: %s\n", frame, e.c_str());
+    else std::fprintf(stderr, "firefly: %s\n", e.c_str());
+}
+
+// Runs every frame; returns the exit code. The report's temporary is opened first, so an
+// unwritable report is found before any output is written.
+int run(const options& c) {
+    firefly_tools::output_set report_set;
+    int report_fd = -1;
+    if (!c.report.empty())
+        if (std::string e = report_set.open(c.report, report_fd); !e.empty()) {
+            std::fprintf(stderr, "firefly: %s\n", e.c_str());
+            return 1;
+        }
+    detector d(c.o, executor::threads(c.threads));
+    json frames = json::array();
+    std::size_t failed = 0;
+    firefly_tools::output_set pending;  // a single frame's outputs wait for the report
+    const long long first = c.sequence ? c.first : 0, last = c.sequence ? c.last : 0;
+    const long long count = (last - first) / c.step + 1;
+    long long index = 0;
+    for (long long f = first; f <= last; f += c.step, ++index) {
+        frame_result fr;
+        run_frame(c, d, f, fr);
+        if (fr.error.empty() && c.sequence) fr.error = fr.outputs.commit();
+        if (!fr.error.empty()) {
+            ++failed;
+            fr.record["error"] = fr.error;
+            complain(c, f, fr.error);
+        }
+        frames.push_back(fr.record);
+        if (!c.sequence) pending = std::move(fr.outputs);
+        if (c.sequence && !c.quiet) std::printf("  [%lld/%lld]%s\n", index + 1, count, fr.error.empty() ? "" : " failed");
+    }
+    std::string e;
+    if (!c.report.empty()) {
+        e = firefly_tools::write_all(report_fd, report_text(c, frames, failed), c.report);
+        if (e.empty()) e = report_set.close_all();
+    }
+    if (e.empty()) e = pending.commit();
+    if (e.empty()) e = report_set.commit();
+    if (!e.empty()) {
+        std::fprintf(stderr, "firefly: %s\n", e.c_str());
+        return 1;
+    }
+    return failed ? 1 : 0;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-    cli c;
+    options c;
     bool done = false;
-    const std::string perr = parse(argc, argv, c, done);
+    std::string e = firefly_cli::parse(argc, argv, c, done);
     if (done) return 0;
-    if (!perr.empty()) {
-        std::fprintf(stderr, "firefly: %s\n", perr.c_str());
+    if (e.empty()) e = check_files(c);
+    if (!e.empty()) {
+        std::fprintf(stderr, "firefly: %s\n", e.c_str());
         return 2;
     }
-    detector d(c.o, executor::threads(c.threads));
-    std::vector<std::string> frames_json;
-    const long first = c.sequence ? c.first : 0, last = c.sequence ? c.last : 0;
-    const long count = (last - first) / c.step + 1;
-    long index = 0;
-    for (long f = first; f <= last; f += c.step, ++index) {
-        std::string json;
-        const std::string e = run_frame(c, d, f, json);
-        if (!e.empty()) {
-            if (c.sequence) std::fprintf(stderr, "firefly: frame %ld: %s\n", f, e.c_str());
-            else std::fprintf(stderr, "firefly: %s\n", e.c_str());
-            return 1;
-        }
-        frames_json.push_back(json);
-        if (c.sequence && !c.quiet) std::printf("  [%ld/%ld]\n", index + 1, count);
-    }
-    if (!c.report.empty()) {
-        char opts[768];
-        std::snprintf(opts, sizeof opts,
-                      "{\"significance\": %g, \"bound\": %g, \"reduction\": \"%s\", \"lambdas\": \"%s\", "
-                      "\"highlight_rule\": \"%s\", \"max_relative_error\": %g, \"max_ratio\": %g, \"min_excess_z\": %g, "
-                      "\"cluster_relative_error\": %g, "
-                      "\"kernel\": %d, \"sigma\": %g, \"tolerance\": %g, \"iterations\": %d, \"threads\": %u}",
-                      c.o.alpha, c.o.bound_threshold,
-                      c.o.reduction == variance_reduction::mean ? "mean" : c.o.reduction == variance_reduction::luminance ? "luminance" : "max",
-                      c.o.lambdas == lambda_method::exact ? "exact" : c.o.lambdas == lambda_method::hill ? "hill" : "normal",
-                      rule_name(c.o.highlight.rule), c.o.highlight.max_relative_error, c.o.highlight.max_ratio,
-                      c.o.highlight.min_excess_z, c.o.highlight.cluster_relative_error, c.o.reconstruction.kernel_width, c.o.reconstruction.sigma,
-                      c.o.reconstruction.tolerance, c.o.reconstruction.max_iterations, c.threads);
-        std::string text = "{\n  \"firefly\": \"" + std::to_string(FIREFLY_VERSION_MAJOR) + "." +
-                           std::to_string(FIREFLY_VERSION_MINOR) + "." + std::to_string(FIREFLY_VERSION_PATCH) +
-                           "\",\n  \"options\": " + opts + ",\n  \"frames\": [\n";
-        for (std::size_t i = 0; i < frames_json.size(); ++i)
-            text += "    " + frames_json[i] + (i + 1 < frames_json.size() ? ",\n" : "\n");
-        text += "  ]\n}\n";
-        const std::string e = write_text_atomic(c.report, text);
-        if (!e.empty()) {
-            std::fprintf(stderr, "firefly: %s\n", e.c_str());
-            return 1;
-        }
-    }
-    return 0;
+    return run(c);
 }

@@ -3,9 +3,16 @@
 // are caught here, at the edge of the tools, and never reach the library.
 #pragma once
 
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
+#include <fstream>
+#include <new>
 #include <string>
 #include <vector>
 
@@ -16,8 +23,10 @@
 #include <OpenEXR/ImfChannelList.h>
 #include <OpenEXR/ImfFrameBuffer.h>
 #include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfIO.h>
 #include <OpenEXR/ImfInputFile.h>
 #include <OpenEXR/ImfOutputFile.h>
+#include <OpenEXR/ImfStdIO.h>
 #endif
 #ifdef FIREFLY_HAVE_PNG
 #include <png.h>
@@ -25,11 +34,19 @@
 
 namespace firefly_tools {
 
-// A float image with named channels, interleaved.
+// An inclusive pixel rectangle, as EXR stores windows.
+struct window {
+    int min_x = 0, min_y = 0, max_x = -1, max_y = -1;
+    bool empty() const { return max_x < min_x || max_y < min_y; }
+};
+
+// A float image with named channels, interleaved. `data_window` and `display_window` come
+// from an EXR input and go to the outputs; empty windows mean "at the origin, image-sized".
 struct image {
     int width = 0, height = 0;
     std::vector<std::string> channels;
     std::vector<float> pixels;
+    window data_window{}, display_window{};
     int channel_count() const { return static_cast<int>(channels.size()); }
 };
 
@@ -48,46 +65,137 @@ inline bool have_png() {
 #endif
 }
 
-// Reads the named channels (in that order) of an EXR file.
-inline std::string read_exr(const std::string& path, const std::vector<std::string>& names, image& out) {
 #ifdef FIREFLY_HAVE_OPENEXR
+// Float samples a file of `file_bytes` may claim: the pixel limit, and no more than 4096
+// floats per byte of file (zlib inflates at most ~1032:1; half data doubles on reading as
+// float) plus 64 MiB, so a tiny file cannot claim gigabytes.
+inline bool exr_size_plausible(std::uint64_t pixels, std::uint64_t channels, std::uint64_t file_bytes) {
+    if (pixels > max_pixels) return false;
+    return pixels * channels * 4 <= (std::uint64_t{64} << 20) + file_bytes * 4096;
+}
+
+inline std::string exr_channels_missing(const Imf::Header& header, const std::vector<std::string>& names) {
+    std::string missing;
+    for (const auto& n : names)
+        if (!header.channels().findChannel(n.c_str())) missing += (missing.empty() ? "" : ", ") + n;
+    if (missing.empty()) return {};
+    std::string have;
+    for (auto it = header.channels().begin(); it != header.channels().end(); ++it)
+        have += (have.empty() ? "" : ", ") + std::string(it.name());
+    return "missing channel(s) " + missing + " (the file has: " + have + ")";
+}
+
+// Reads the named channels (in that order) from an EXR stream of `stream_bytes` bytes; the
+// function the file reader and the fuzz target share. `name` labels the messages.
+inline std::string read_exr(Imf::IStream& in, std::uint64_t stream_bytes, const std::string& name,
+                            const std::vector<std::string>& names, image& out) {
     try {
-        {
-            std::FILE* probe = std::fopen(path.c_str(), "rb");
-            if (!probe) return "cannot open " + path;
-            unsigned char magic[4] = {0, 0, 0, 0};
-            const bool ok = std::fread(magic, 1, 4, probe) == 4;
-            std::fclose(probe);
-            if (!ok || magic[0] != 0x76 || magic[1] != 0x2f || magic[2] != 0x31 || magic[3] != 0x01)
-                return path + " is not an OpenEXR file";
-        }
-        Imf::InputFile file(path.c_str());
+        char magic[4] = {0, 0, 0, 0};
+        if (stream_bytes < 8 || !in.read(magic, 4) || magic[0] != 0x76 || magic[1] != 0x2f || magic[2] != 0x31 ||
+            magic[3] != 0x01)
+            return name + " is not an OpenEXR file";
+        in.seekg(0);
+        // Header sanity checks refuse huge windows before OpenEXR allocates for them.
+        Imf::Header::setMaxImageSize(max_side, max_side);
+        Imf::Header::setMaxTileSize(max_side, max_side);
+        Imf::InputFile file(in);
         const Imath::Box2i dw = file.header().dataWindow();
-        const long w = static_cast<long>(dw.max.x) - dw.min.x + 1, h = static_cast<long>(dw.max.y) - dw.min.y + 1;
-        if (w <= 0 || h <= 0 || w > (1 << 16) || h > (1 << 16)) return path + ": bad data window";
-        std::string missing;
-        for (const auto& n : names)
-            if (!file.header().channels().findChannel(n.c_str())) missing += (missing.empty() ? "" : ", ") + n;
-        if (!missing.empty()) {
-            std::string have;
-            for (auto it = file.header().channels().begin(); it != file.header().channels().end(); ++it)
-                have += (have.empty() ? "" : ", ") + std::string(it.name());
-            return path + ": missing channel(s) " + missing + " (the file has: " + have + ")";
-        }
+        const std::int64_t w = std::int64_t{dw.max.x} - dw.min.x + 1, h = std::int64_t{dw.max.y} - dw.min.y + 1;
+        if (w <= 0 || h <= 0 || w > max_side || h > max_side) return name + ": bad data window";
+        const std::string missing = exr_channels_missing(file.header(), names);
+        if (!missing.empty()) return name + ": " + missing;
+        const std::size_t nc = names.size();
+        if (!exr_size_plausible(static_cast<std::uint64_t>(w * h), nc, stream_bytes))
+            return name + ": the data window is too large for the file (or beyond the 2^27-pixel limit)";
         out.width = static_cast<int>(w);
         out.height = static_cast<int>(h);
         out.channels = names;
-        const std::size_t nc = names.size();
         out.pixels.assign(static_cast<std::size_t>(w * h) * nc, 0.0f);
+        const Imath::Box2i disp = file.header().displayWindow();
+        out.data_window = {dw.min.x, dw.min.y, dw.max.x, dw.max.y};
+        out.display_window = {disp.min.x, disp.min.y, disp.max.x, disp.max.y};
+        // Slice::Make places the window's origin with integer (not pointer) arithmetic, so
+        // windows far from (0, 0) address nothing outside the buffer.
         Imf::FrameBuffer fb;
-        for (std::size_t c = 0; c < nc; ++c) {
-            char* base = reinterpret_cast<char*>(out.pixels.data() + c) -
-                         (static_cast<long>(dw.min.x) + static_cast<long>(dw.min.y) * w) * static_cast<long>(nc * sizeof(float));
-            fb.insert(names[c].c_str(), Imf::Slice(Imf::FLOAT, base, nc * sizeof(float), nc * sizeof(float) * static_cast<std::size_t>(w)));
-        }
+        for (std::size_t c = 0; c < nc; ++c)
+            fb.insert(names[c].c_str(), Imf::Slice::Make(Imf::FLOAT, out.pixels.data() + c, dw, nc * sizeof(float),
+                                                         nc * sizeof(float) * static_cast<std::size_t>(w)));
         file.setFrameBuffer(fb);
         file.readPixels(dw.min.y, dw.max.y);
         return {};
+    } catch (const std::bad_alloc&) {
+        return name + ": out of memory";
+    } catch (const std::exception& e) {
+        return name + ": " + e.what();
+    }
+}
+
+// An Imf::OStream over an open file descriptor (the exclusive temporary of an output).
+class fd_ostream : public Imf::OStream {
+public:
+    fd_ostream(int fd, const std::string& name) : Imf::OStream(name.c_str()), fd_(fd) {}
+    void write(const char c[], int n) override {
+        while (n > 0) {
+            const ssize_t k = ::write(fd_, c, static_cast<std::size_t>(n));
+            if (k < 0 && errno == EINTR) continue;
+            if (k <= 0) throw std::runtime_error(std::string("write failed: ") + fileName());
+            c += k;
+            n -= static_cast<int>(k);
+        }
+    }
+    uint64_t tellp() override {
+        const off_t p = ::lseek(fd_, 0, SEEK_CUR);
+        if (p < 0) throw std::runtime_error(std::string("seek failed: ") + fileName());
+        return static_cast<uint64_t>(p);
+    }
+    void seekp(uint64_t pos) override {
+        if (::lseek(fd_, static_cast<off_t>(pos), SEEK_SET) < 0)
+            throw std::runtime_error(std::string("seek failed: ") + fileName());
+    }
+
+private:
+    int fd_;
+};
+
+inline Imath::Box2i box_of(const window& w, const Imath::Box2i& fallback) {
+    return w.empty() ? fallback : Imath::Box2i({w.min_x, w.min_y}, {w.max_x, w.max_y});
+}
+
+// Writes all channels of `img` as 32-bit float EXR (ZIP compression) to a stream.
+inline std::string write_exr(Imf::OStream& os, const image& img) {
+    try {
+        const Imath::Box2i origin({0, 0}, {img.width - 1, img.height - 1});
+        const Imath::Box2i dw = box_of(img.data_window, origin);
+        if (std::int64_t{dw.max.x} - dw.min.x + 1 != img.width || std::int64_t{dw.max.y} - dw.min.y + 1 != img.height)
+            return std::string(os.fileName()) + ": the data window does not match the image size";
+        Imf::Header header(box_of(img.display_window, dw), dw);
+        header.compression() = Imf::ZIP_COMPRESSION;
+        const std::size_t nc = img.channels.size();
+        for (const auto& n : img.channels) header.channels().insert(n.c_str(), Imf::Channel(Imf::FLOAT));
+        Imf::OutputFile file(os, header);
+        Imf::FrameBuffer fb;
+        for (std::size_t c = 0; c < nc; ++c)
+            fb.insert(img.channels[c].c_str(), Imf::Slice::Make(Imf::FLOAT, img.pixels.data() + c, dw, nc * sizeof(float),
+                                                                nc * sizeof(float) * static_cast<std::size_t>(img.width)));
+        file.setFrameBuffer(fb);
+        file.writePixels(img.height);
+        return {};
+    } catch (const std::exception& e) {
+        return std::string(os.fileName()) + ": " + e.what();
+    }
+}
+#endif
+
+// Reads the named channels (in that order) of an EXR file: a regular file, size known.
+inline std::string read_exr(const std::string& path, const std::vector<std::string>& names, image& out) {
+#ifdef FIREFLY_HAVE_OPENEXR
+    try {
+        std::ifstream f(path, std::ios::binary);
+        struct stat st {};
+        if (!f || stat(path.c_str(), &st) != 0) return "cannot open " + path;
+        if (!S_ISREG(st.st_mode)) return path + " is not a regular file";
+        Imf::StdIFStream in(f, path.c_str());
+        return read_exr(in, static_cast<std::uint64_t>(st.st_size), path, names, out);
     } catch (const std::exception& e) {
         return path + ": " + e.what();
     }
@@ -98,23 +206,13 @@ inline std::string read_exr(const std::string& path, const std::vector<std::stri
 #endif
 }
 
-// Writes all channels of `img` as 32-bit float EXR (ZIP compression).
+// Writes `img` to a file by name (the demo's outputs; the command-line tool writes through
+// exclusive temporaries instead).
 inline std::string write_exr(const std::string& path, const image& img) {
 #ifdef FIREFLY_HAVE_OPENEXR
     try {
-        Imf::Header header(img.width, img.height);
-        header.compression() = Imf::ZIP_COMPRESSION;
-        const std::size_t nc = img.channels.size();
-        for (const auto& n : img.channels) header.channels().insert(n.c_str(), Imf::Channel(Imf::FLOAT));
-        Imf::OutputFile file(path.c_str(), header);
-        Imf::FrameBuffer fb;
-        for (std::size_t c = 0; c < nc; ++c)
-            fb.insert(img.channels[c].c_str(),
-                      Imf::Slice(Imf::FLOAT, const_cast<char*>(reinterpret_cast<const char*>(img.pixels.data() + c)),
-                                 nc * sizeof(float), nc * sizeof(float) * static_cast<std::size_t>(img.width)));
-        file.setFrameBuffer(fb);
-        file.writePixels(img.height);
-        return {};
+        Imf::StdOFStream os(path.c_str());
+        return write_exr(os, img);
     } catch (const std::exception& e) {
         return path + ": " + e.what();
     }
@@ -124,13 +222,14 @@ inline std::string write_exr(const std::string& path, const image& img) {
 #endif
 }
 
-// An 8-bit sRGB preview of an RGB image (channels 0..2), exposure-scaled and clamped.
-inline std::string write_png_preview(const std::string& path, const float* rgb, int width, int height,
+// An 8-bit sRGB preview of an RGB image (channels 0..2), exposure-scaled and clamped, to an
+// open stdio stream (`name` labels the messages).
+inline std::string write_png_preview(std::FILE* f, const std::string& name, const float* rgb, int width, int height,
                                      std::size_t stride_channels = 3, float exposure = 1.0f) {
 #ifdef FIREFLY_HAVE_PNG
-    std::vector<unsigned char> px(static_cast<std::size_t>(width) * height * 3);
-    for (std::size_t i = 0; i < static_cast<std::size_t>(width) * height; ++i)
-        for (int c = 0; c < 3; ++c) {
+    std::vector<unsigned char> px(static_cast<std::size_t>(width) * static_cast<std::size_t>(height) * 3);
+    for (std::size_t i = 0; i < static_cast<std::size_t>(width) * static_cast<std::size_t>(height); ++i)
+        for (std::size_t c = 0; c < 3; ++c) {
             float v = rgb[i * stride_channels + c] * exposure;
             v = std::isfinite(v) ? std::clamp(v, 0.0f, 1.0f) : 1.0f;
             v = v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1.0f / 2.4f) - 0.055f;
@@ -141,17 +240,26 @@ inline std::string write_png_preview(const std::string& path, const float* rgb, 
     im.width = static_cast<png_uint_32>(width);
     im.height = static_cast<png_uint_32>(height);
     im.format = PNG_FORMAT_RGB;
-    if (!png_image_write_to_file(&im, path.c_str(), 0, px.data(), 0, nullptr))
-        return path + ": " + im.message;
+    if (!png_image_write_to_stdio(&im, f, 0, px.data(), 0, nullptr)) return name + ": " + im.message;
     return {};
 #else
+    (void)f;
     (void)rgb;
     (void)width;
     (void)height;
     (void)stride_channels;
     (void)exposure;
-    return path + " skipped: built without libpng (apt-get install libpng-dev)";
+    return name + " skipped: built without libpng (apt-get install libpng-dev)";
 #endif
+}
+
+inline std::string write_png_preview(const std::string& path, const float* rgb, int width, int height,
+                                     std::size_t stride_channels = 3, float exposure = 1.0f) {
+    std::FILE* f = std::fopen(path.c_str(), "wb");
+    if (!f) return "cannot write " + path;
+    std::string e = write_png_preview(f, path, rgb, width, height, stride_channels, exposure);
+    if (std::fclose(f) != 0 && e.empty()) e = "write failed: " + path;
+    return e;
 }
 
 }  // namespace firefly_tools

@@ -1,0 +1,297 @@
+// The command line of `firefly`, parsed with CLI11: every number is checked for its form
+// (a whole number where one is wanted, finite) and its range before it is used.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <firefly/firefly.hpp>
+
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <map>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "image_io.hpp"
+
+namespace firefly_cli {
+
+struct options {
+    std::string in_a, in_b, out, halves, masks, report, preview;
+    float exposure = 1.0f;
+    std::string var_a, var_b;  // PFM variance files
+    std::vector<std::string> colour = {"R", "G", "B"};
+    std::vector<std::string> variance = {"Variance.R", "Variance.G", "Variance.B"};
+    std::string alpha = "A";
+    bool use_alpha = true, quiet = false;
+    bool sequence = false;
+    long long first = 0, last = 0, step = 1;
+    firefly::detector_options o;
+    unsigned threads = 1;
+};
+
+// Frame numbers and counts the tool accepts: far from any overflow of `long long`.
+inline constexpr long long max_frame = 999999999;
+inline constexpr long long max_frames = 1000000;
+
+inline bool ends_with_ci(const std::string& s, const char* suffix) {
+    const std::size_t n = std::strlen(suffix);
+    if (s.size() < n) return false;
+    for (std::size_t i = 0; i < n; ++i)
+        if (std::tolower(static_cast<unsigned char>(s[s.size() - n + i])) != suffix[i]) return false;
+    return true;
+}
+
+inline std::vector<std::string> split(const std::string& s) {
+    std::vector<std::string> out;
+    std::size_t start = 0;
+    while (true) {
+        const std::size_t comma = s.find(',', start);
+        out.push_back(s.substr(start, comma - start));
+        if (comma == std::string::npos) break;
+        start = comma + 1;
+    }
+    return out;
+}
+
+// A whole decimal number (optional sign, digits only) within [lo, hi].
+inline bool parse_whole(const std::string& s, long long lo, long long hi, long long& v) {
+    if (s.empty() || s.size() > 19) return false;
+    std::size_t i = (s[0] == '-' || s[0] == '+') ? 1 : 0;
+    if (i == s.size()) return false;
+    for (std::size_t k = i; k < s.size(); ++k)
+        if (s[k] < '0' || s[k] > '9') return false;
+    errno = 0;
+    char* end = nullptr;
+    v = std::strtoll(s.c_str(), &end, 10);
+    return errno == 0 && *end == '\0' && v >= lo && v <= hi;
+}
+
+// FIRST-LAST[:STEP]; FIRST may be negative.
+inline std::string parse_frames(const std::string& s, options& c) {
+    const char* form = "--frames wants FIRST-LAST or FIRST-LAST:STEP with FIRST <= LAST, frame numbers within "
+                       "+-999999999 and at most 1000000 frames";
+    const std::size_t dash = s.find('-', 1);
+    if (dash == std::string::npos) return form;
+    const std::size_t colon = s.find(':', dash);
+    long long f = 0, l = 0, st = 1;
+    if (!parse_whole(s.substr(0, dash), -max_frame, max_frame, f) ||
+        !parse_whole(s.substr(dash + 1, colon == std::string::npos ? std::string::npos : colon - dash - 1), -max_frame,
+                     max_frame, l) ||
+        (colon != std::string::npos && !parse_whole(s.substr(colon + 1), 1, max_frame, st)) || l < f ||
+        (l - f) / st + 1 > max_frames)
+        return form;
+    c.sequence = true;
+    c.first = f;
+    c.last = l;
+    c.step = st;
+    return {};
+}
+
+// Validators: a finite number in a range (open or closed ends), a whole number in a range.
+inline CLI::Validator number_in(double lo, double hi, bool open_lo, bool open_hi, const std::string& what) {
+    return CLI::Validator(
+        [=](std::string& s) -> std::string {
+            char* end = nullptr;
+            errno = 0;
+            const double v = std::strtod(s.c_str(), &end);
+            const bool ok = !s.empty() && *end == '\0' && errno == 0 && std::isfinite(v) &&
+                            (open_lo ? v > lo : v >= lo) && (open_hi ? v < hi : v <= hi);
+            return ok ? std::string() : "wants " + what + ", not '" + s + "'";
+        },
+        "");
+}
+inline CLI::Validator whole_in(long long lo, long long hi, const std::string& what) {
+    return CLI::Validator(
+        [=](std::string& s) -> std::string {
+            long long v = 0;
+            return parse_whole(s, lo, hi, v) ? std::string() : "wants " + what + ", not '" + s + "'";
+        },
+        "");
+}
+
+const char* const description =
+    "Removes fireflies from a Monte Carlo render given as two half buffers (each holding half\n"
+    "of every pixel's samples) with per-pixel variance, and writes the combined image.\n"
+    "  firefly half_a.exr half_b.exr -o clean.exr\n"
+    "  firefly beauty_a.####.exr beauty_b.####.exr --frames 1-240 -o clean.####.exr\n";
+
+const char* const footer =
+    "Outputs: every file of a frame is first written to an exclusive temporary in its folder and\n"
+    "renamed only when all of them are complete; a failure leaves none of them. An output that is\n"
+    "an input (same file under any name) is refused. A sequence goes on past a bad frame, reports\n"
+    "it (stderr and --report) and exits 1 at the end.\n";
+
+// An option taking one of a few words (name -> value).
+template <class E>
+void add_choice(CLI::App& app, const char* name, E& target, const std::map<std::string, E>& values, const char* text,
+                const char* group) {
+    std::string words, current;
+    for (const auto& kv : values) {
+        words += (words.empty() ? "" : ", ") + kv.first;
+        if (kv.second == target) current = kv.first;
+    }
+    app.add_option_function<std::string>(
+           name, [&target, values](const std::string& s) { target = values.at(s); }, text)
+        ->check(CLI::Validator(
+            [values, words](std::string& s) {
+                return values.count(s) ? std::string() : "wants one of " + words + ", not '" + s + "'";
+            },
+            ""))
+        ->default_str(current)
+        ->type_name("WORD")
+        ->group(group);
+}
+
+void add_detector_options(CLI::App& app, options& c);
+
+inline void add_io_options(CLI::App& app, options& c, std::vector<std::string>& positional, std::string& frames,
+                           std::string& channels, std::string& variance) {
+    app.add_option("inputs", positional,
+                   "OpenEXR files, one per half: colour and variance channels (PFM colour files work too, with "
+                   "--variance-a/--variance-b)")
+        ->type_name("HALF_A HALF_B")
+        ->group("inputs");
+    app.add_option("--channels", channels, "colour channel names (three)")->type_name("NAMES")->default_str("R,G,B")->group("inputs");
+    app.add_option("--variance", variance, "variance channel names (1 or 3)")->type_name("NAMES")
+        ->default_str("Variance.R,Variance.G,Variance.B")
+        ->group("inputs");
+    app.add_option("--alpha-channel", c.alpha, "alpha channel; used when present")->type_name("NAME")->group("inputs");
+    app.add_flag_callback("--no-alpha", [&c] { c.use_alpha = false; }, "ignore alpha even when present")->group("inputs");
+    app.add_option("--variance-a", c.var_a, "variance PFM file of half A (PFM colour inputs)")->type_name("FILE")->group("inputs");
+    app.add_option("--variance-b", c.var_b, "variance PFM file of half B (PFM colour inputs)")->type_name("FILE")->group("inputs");
+    app.add_option("--frames", frames,
+                   "FIRST-LAST[:STEP] frame sequence: '#' runs in every path become the frame number, zero-padded "
+                   "to the run's length")->type_name("FIRST-LAST[:STEP]")
+        ->group("inputs");
+    app.add_option("-o,--output", c.out, "combined cleaned image (EXR: colour, Variance.*, alpha)")->type_name("FILE")->group("outputs");
+    app.add_option("--halves", c.halves, "also write PREFIX_a.exr and PREFIX_b.exr (cleaned halves)")->type_name("PREFIX")->group("outputs");
+    app.add_option("--masks", c.masks,
+                   "also write PREFIX_a.exr and PREFIX_b.exr with channels firefly, highlight, consistent, nonfinite "
+                   "(0 or 1)")->type_name("PREFIX")
+        ->group("outputs");
+    app.add_option("--report", c.report, "JSON report: options, per-frame counts, timings and errors")->type_name("FILE")->group("outputs");
+    app.add_option("--preview", c.preview, "PNG previews PREFIX_before.png, PREFIX_after.png (sRGB)")->type_name("PREFIX")->group("outputs");
+    app.add_option("--exposure", c.exposure, "preview exposure multiplier")->type_name("X")
+        ->check(number_in(0, 1e30, true, false, "a positive number"))
+        ->group("outputs");
+    app.add_flag("-q,--quiet", c.quiet, "no progress lines")->group("outputs");
+}
+
+inline void add_detector_options(CLI::App& app, options& c) {
+    const char* g = "detector options";
+    auto& o = c.o;
+    app.add_option("--significance", o.alpha, "generalized ESD alpha")->type_name("X")->check(number_in(0, 1, true, true, "a number in (0, 1)"))->group(g);
+    app.add_option("--bound", o.bound_threshold, "modified Z-score threshold")->type_name("X")->check(number_in(0, 1e30, false, false, "a number >= 0"))->group(g);
+    add_choice(app, "--reduction", o.reduction,
+               std::map<std::string, firefly::variance_reduction>{{"mean", firefly::variance_reduction::mean},
+                                                                  {"luminance", firefly::variance_reduction::luminance},
+                                                                  {"max", firefly::variance_reduction::max}},
+               "channel variances to one number: mean, luminance or max", g);
+    add_choice(app, "--lambdas", o.lambdas,
+               std::map<std::string, firefly::lambda_method>{{"exact", firefly::lambda_method::exact},
+                                                             {"hill", firefly::lambda_method::hill},
+                                                             {"normal", firefly::lambda_method::normal}},
+               "Student-t method for the critical values: exact, hill or normal", g);
+    add_choice(app, "--highlight-rule", o.highlight.rule,
+               std::map<std::string, firefly::highlight_rule>{
+                   {"same_pixel", firefly::highlight_rule::same_pixel},
+                   {"agree", firefly::highlight_rule::agree},
+                   {"confident", firefly::highlight_rule::confident},
+                   {"confident_and_agree", firefly::highlight_rule::confident_and_agree}},
+               "same_pixel, agree, confident or confident_and_agree", g);
+    app.add_option("--max-relative-error", o.highlight.max_relative_error, "confident rule threshold")->type_name("X")->check(number_in(0, 1e30, false, false, "a number >= 0"))->group(g);
+    app.add_option("--max-ratio", o.highlight.max_ratio, "agree rule factor")->type_name("X")->check(number_in(1, 1e30, false, false, "a number >= 1"))->group(g);
+    app.add_option("--min-excess-z", o.highlight.min_excess_z, "one-half outliers must exceed the other half by X sd; 0: off")->type_name("X")
+        ->check(number_in(0, 1e30, false, false, "a number >= 0"))->group(g);
+    app.add_option("--cluster-relative-error", o.highlight.cluster_relative_error,
+                   "confident rule bound for pixels next to another both-half outlier; 0: off")
+        ->check(number_in(0, 1e30, false, false, "a number >= 0"))->group(g);
+    app.add_option("--kernel", o.reconstruction.kernel_width, "reconstruction kernel width, odd, 3 to 63")->type_name("N")
+        ->check(whole_in(3, 63, "an odd whole number from 3 to 63") &
+                CLI::Validator([](std::string& s) { return std::atoll(s.c_str()) % 2 ? "" : "wants an odd whole number, not '" + s + "'"; }, ""))
+        ->group(g);
+    app.add_option("--sigma", o.reconstruction.sigma, "reconstruction Gaussian sigma")->type_name("X")->check(number_in(0, 1e30, true, false, "a positive number"))->group(g);
+    app.add_option("--tolerance", o.reconstruction.tolerance, "phase 2 relative tolerance")->type_name("X")->check(number_in(0, 1e30, false, false, "a number >= 0"))->group(g);
+    app.add_option("--iterations", o.reconstruction.max_iterations, "phase 2 iteration cap")->type_name("N")
+        ->check(whole_in(0, 1000000, "a whole number from 0 to 1000000"))->group(g);
+    app.add_option("--threads", c.threads, "threads; results are identical for any count")->type_name("N")
+        ->check(whole_in(1, 256, "a whole number from 1 to 256"))->group(g);
+}
+
+// Channel names must be distinct: a colour, variance or alpha channel read twice would be
+// written twice.
+inline std::string check_channel_names(const options& c) {
+    std::set<std::string> seen;
+    std::vector<std::string> all = c.colour;
+    all.insert(all.end(), c.variance.begin(), c.variance.end());
+    if (c.use_alpha) all.push_back(c.alpha);
+    for (const auto& n : all) {
+        if (n.empty()) return "empty channel name in --channels, --variance or --alpha-channel";
+        if (!seen.insert(n).second)
+            return "channel " + n + " is named twice (--channels, --variance and --alpha-channel must differ)";
+    }
+    return {};
+}
+
+// Checks across options, after parsing.
+inline std::string check_parsed(options& c, const std::vector<std::string>& positional, const std::string& channels,
+                                const std::string& variance) {
+    if (!channels.empty() && (c.colour = split(channels)).size() != 3) return "--channels wants three names, e.g. R,G,B";
+    if (!variance.empty()) {
+        c.variance = split(variance);
+        if (c.variance.size() != 1 && c.variance.size() != 3) return "--variance wants one or three names";
+    }
+    if (std::string e = check_channel_names(c); !e.empty()) return e;
+    if (positional.size() != 2) return "expected two inputs, HALF_A and HALF_B (firefly --help)";
+    if (c.out.empty()) return "no output: give -o FILE";
+    c.in_a = positional[0];
+    c.in_b = positional[1];
+    if (!c.preview.empty() && !firefly_tools::have_png())
+        return "--preview needs PNG support: rebuild with libpng-dev installed";
+    if (const firefly::status st = firefly::check_options(c.o); !st.ok()) return std::string("bad option: ") + st.message();
+    const bool pfm = ends_with_ci(c.in_a, ".pfm") || ends_with_ci(c.in_b, ".pfm");
+    if (pfm && (c.var_a.empty() || c.var_b.empty()))
+        return "PFM inputs hold colour only: give --variance-a and --variance-b PFM files";
+    if (c.sequence && c.out.find('#') == std::string::npos)
+        return "--frames needs '#' in the output name too, e.g. clean.####.exr";
+    return {};
+}
+
+// Parses the command line. Returns the complaint (one line) or empty; `done` is set when
+// --help or --version was answered.
+inline std::string parse(int argc, char** argv, options& c, bool& done) {
+    CLI::App app(description, "firefly");
+    app.footer(footer);
+    app.option_defaults()->always_capture_default();
+    app.get_formatter()->column_width(34);
+    std::vector<std::string> positional;
+    std::string frames, channels, variance;
+    bool version = false;
+    add_io_options(app, c, positional, frames, channels, variance);
+    add_detector_options(app, c);
+    app.add_flag("--version", version, "print the version");
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::CallForHelp&) {
+        std::fputs(app.help().c_str(), stdout);
+        done = true;
+        return {};
+    } catch (const CLI::ExtrasError& e) {
+        return std::string("unknown option or extra argument: ") + e.what() + " (firefly --help lists them)";
+    } catch (const CLI::ParseError& e) {
+        return e.what();
+    }
+    if (version) {
+        std::printf("firefly %d.%d.%d\n", FIREFLY_VERSION_MAJOR, FIREFLY_VERSION_MINOR, FIREFLY_VERSION_PATCH);
+        done = true;
+        return {};
+    }
+    if (!frames.empty())
+        if (std::string e = parse_frames(frames, c); !e.empty()) return e;
+    return check_parsed(c, positional, channels, variance);
+}
+
+}  // namespace firefly_cli
