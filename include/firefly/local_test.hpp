@@ -1,0 +1,281 @@
+// firefly: the local, brightness-invariant firefly test (issues 15 and 17).
+//
+// Model. The two halves hold independent means of the same pixel's samples. Whatever the
+// per-sample law, a half mean L is positive and, to the first two moments, a gamma variable
+// of shape m = E[L]^2 / Var[L] (m = N k for N samples of a gamma(k) law; the moment match of
+// Satterthwaite otherwise). For two independent gamma(m) means of one expected value,
+// L_A / L_B ~ F(2m, 2m), and (Cacoullos 1965)
+//
+//     T = sqrt(m / 2) (sqrt(L_A / L_B) - sqrt(L_B / L_A))  ~  Student t, 2m degrees of freedom,
+//
+// exactly. T is a ratio, so brightness cancels: a pixel at 0.01 and one at 10 are judged
+// alike. Half A is flagged when T > t_{2m}(q) (one-sided: a firefly adds light), half B
+// with -T. A pixel is flagged in at most one half; an outlier in both halves is the global
+// test's and the highlight check's business.
+//
+// The shape m. 1/m = r = Var[L] / E[L]^2, the relative variance of a half mean, which the
+// renderer's variance gives per pixel: r = (mean over channels of sd_c)^2 / (mean colour)^2
+// (the channels of one sample move together). A firefly inflates its own half's r, so r is
+// estimated without it, from the (2 radius + 1)^2 - 1 neighbours in both halves:
+//     r~ = exp(median log r + s^2 / 2),  s = MAD(log r) / 0.6745
+// (the median of variance estimates sits below their mean; exp(s^2 / 2) is the mean over
+// the median of a lognormal), and never below the other half's r at the same pixel (a
+// highlight or an edge is noisier than its surroundings, and the other half says so).
+// Relative variances do not change across fine detail, gradients or texture that keep the
+// noise's character, only across changes of material or lighting.
+//
+// Promise. In a frame without fireflies, the expected share of tested pixel-halves flagged
+// is at most q (options.false_alarm, default 1e-4), under the model above. Measured on
+// simulated frames with gamma(k) per-sample noise, k 1 to 16, 4 to 1024 samples per half,
+// three-decade gradients, fine detail (6x lines, an 8x checker), highlights (25x, relative
+// per-sample sd 2.5), black background and alpha (bench/research/local_stats.py and the
+// [local][calibration] test): <= q at 16 and more samples per half; at 4 samples up to ~4q
+// (r from 3 degrees of freedom is a poor estimate even pooled).
+//
+// Measured (per-pixel q = 1e-4; bench/research/local_stats.py, 256x192):
+//   simulated, fireflies 2-20x the pixel, 1% of pixels per half, 64 spp:
+//       recall 0.97 (k = 1), 1.00 (k = 4); false positives <= 2e-4 of clean pixel-halves
+//   simulated, 30-1000x: recall 1.00 at 16 and 64 spp
+//   real renders, flagged pixels replaced by the other half's value (reconstruction stand-in):
+//       see the table in bench/research/README.md
+// The statistic's power is that of one pixel against one other independent estimate: at
+// m ~ 3 (every pixel of the cycles-interior render) a pixel 3x its other half is ordinary
+// under the model, and the test does not flag it.
+//
+// Cost: one pass over both halves' colour and variance (the mean colour and log r per pixel
+// and half), then one over those arrays; the neighbourhood medians are taken only for pixels
+// whose pair statistic could pass (with r~ >= r_other, T <= the pair statistic with the
+// other half's own r, and t_{2m}(q) >= z_q). Deterministic, no scan order: the medians are
+// order-free, so the flags are the same under the 8 flips and transposes of the frame.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <type_traits>
+#include <vector>
+
+#include "image_view.hpp"
+#include "status.hpp"
+#include "stddev.hpp"
+#include "student_t.hpp"
+
+namespace firefly {
+
+struct local_test_options {
+    double false_alarm = 1e-4;      // q: expected share of tested pixel-halves flagged in a
+                                    // frame without fireflies
+    int radius = 2;                 // neighbourhood (2 radius + 1)^2 in both halves
+    int min_neighbours = 8;         // fewer valid neighbour values: the pixel is not tested
+    double variance_scale = 1.0;    // turns the given variance into the variance of the half
+                                    // mean (1: it already is; the number of samples when the
+                                    // renderer stores the variance of the samples)
+};
+
+inline status check_local_test_options(const local_test_options& o) noexcept {
+    if (!(o.false_alarm > 0.0 && o.false_alarm < 0.5))
+        return status{errc::invalid_argument, "local test: false_alarm must lie in (0, 0.5)"};
+    if (o.radius < 1 || o.radius > 8)
+        return status{errc::invalid_argument, "local test: radius must lie in [1, 8]"};
+    if (o.min_neighbours < 1)
+        return status{errc::invalid_argument, "local test: min_neighbours must be >= 1"};
+    if (!(o.variance_scale > 0.0) || !std::isfinite(o.variance_scale))
+        return status{errc::invalid_argument, "local test: variance_scale must be finite and > 0"};
+    return ok_status();
+}
+
+// Pixels flagged in one half, in row-major order (sorted), with their scores T / t_{2m}(q)
+// (> 1: how far past the threshold).
+struct local_flags {
+    std::vector<std::uint32_t> index;
+    std::vector<float> score;
+};
+
+struct local_test_result {
+    local_flags half[2];
+    std::size_t tested = 0;        // pixels tested (each tests both halves)
+    std::size_t screened = 0;      // pixels whose neighbourhood statistics were computed
+};
+
+// Memory reused across frames.
+struct local_test_scratch {
+    std::vector<double> level[2];  // mean colour; NaN where the pixel does not count
+    std::vector<float> log_r[2];   // log relative variance; NaN where unusable
+    std::vector<float> pool;
+    std::size_t bytes() const noexcept {
+        return (level[0].capacity() + level[1].capacity()) * sizeof(double) +
+               (log_r[0].capacity() + log_r[1].capacity() + pool.capacity()) * sizeof(float);
+    }
+};
+
+// One half buffer's views for the test; alpha may be empty. label (optional, pixel_count
+// bytes, row-major): the stddev pass's labels, pixel_class in the low bits; when null the
+// class is computed here (black: every colour channel 0; alpha <= 0; NaN/Inf anywhere).
+template <class T>
+struct local_half {
+    image_view<const T> color;
+    image_view<const T> variance;
+    image_view<const T> alpha{};
+    const std::uint8_t* label = nullptr;
+};
+
+namespace detail {
+
+// Relative variances below this count as this: float colour carries ~1e-7 relative
+// rounding, so a smaller relative sd is not information (and m stays finite).
+inline constexpr double min_relative_variance = 1e-14;
+
+// Level (mean colour) and log relative variance of every pixel of one half.
+template <class T>
+void local_levels(const local_half<T>& h, double scale, std::vector<double>& level, std::vector<float>& log_r) {
+    const int w = h.color.width(), ht = h.color.height();
+    const int nc = colour_channels(h.color.channels());
+    const int nv = h.variance.channels();
+    const std::size_t n = h.color.pixel_count();
+    level.resize(n);
+    log_r.resize(n);
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    for (int y = 0; y < ht; ++y)
+        for (int x = 0; x < w; ++x) {
+            const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+            double sum = 0, sd = 0;
+            bool finite = true, black = true;
+            for (int c = 0; c < nc; ++c) {
+                const double v = h.color.load(x, y, c);
+                const double var = h.variance.load(x, y, nv == 1 ? 0 : c);
+                finite &= std::isfinite(v) && std::isfinite(var);
+                black &= v == 0.0;
+                sum += v;
+                sd += std::sqrt(std::max(var, 0.0) * scale);  // NaN var: caught by finite
+            }
+            bool counts;
+            if (h.label) {
+                counts = (h.label[i] & pixel_class_bits) == static_cast<std::uint8_t>(pixel_class::valid);
+                counts &= finite;  // labels computed with another view must not let NaN in
+            } else {
+                const double a = h.alpha.empty() ? 1.0 : h.alpha.load(x, y, 0);
+                counts = finite && !black && std::isfinite(a) && a > 0;
+            }
+            const double mean = sum / nc;  // finite sums of floats up to FLT_MAX stay finite
+            if (!counts || !(mean > 0) || !std::isfinite(mean)) {
+                level[i] = counts ? mean : nan;
+                log_r[i] = std::numeric_limits<float>::quiet_NaN();
+                continue;
+            }
+            level[i] = mean;
+            // r = (sd / nc)^2 / mean^2, formed as a ratio first (no overflow near FLT_MAX)
+            const double rel = (sd / nc) / mean;
+            const double r = std::max(rel * rel, min_relative_variance);
+            log_r[i] = std::isfinite(r) ? static_cast<float>(std::log(r)) : std::numeric_limits<float>::quiet_NaN();
+        }
+}
+
+// Median of p[0..n) (n >= 1), reordering p: the mean of the two middle values when n is even.
+inline double small_median(float* p, std::size_t n) noexcept {
+    const std::size_t k = n / 2;
+    std::nth_element(p, p + k, p + n);
+    const double hi = p[k];
+    if (n % 2) return hi;
+    const double lo = *std::max_element(p, p + k);
+    return 0.5 * (lo + hi);
+}
+
+// r~ from the neighbourhood's log r values in both halves (centre excluded): exp(median +
+// s^2 / 2), and the degrees of freedom of that estimate, 4 n / (pi s^2) (a median of n
+// values has variance pi s^2 / (2 n), and log of a variance estimate with d degrees of
+// freedom has variance 2 / d). nu is NaN when fewer than min_count values are usable.
+struct pooled_estimate {
+    double r = 0;
+    double nu = std::numeric_limits<double>::quiet_NaN();
+};
+
+inline pooled_estimate pooled_relative_variance(const std::vector<float> (&log_r)[2], int w, int h, int x, int y,
+                                                int radius, int min_count, std::vector<float>& pool) {
+    pool.clear();
+    const int x0 = std::max(x - radius, 0), x1 = std::min(x + radius, w - 1);
+    const int y0 = std::max(y - radius, 0), y1 = std::min(y + radius, h - 1);
+    for (int yy = y0; yy <= y1; ++yy)
+        for (int xx = x0; xx <= x1; ++xx) {
+            if (xx == x && yy == y) continue;
+            const std::size_t j = static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(xx);
+            for (int half = 0; half < 2; ++half)
+                if (log_r[half][j] == log_r[half][j]) pool.push_back(log_r[half][j]);
+        }
+    pooled_estimate e;
+    if (pool.size() < static_cast<std::size_t>(std::max(min_count, 1))) return e;
+    const double n = static_cast<double>(pool.size());
+    const double med = small_median(pool.data(), pool.size());
+    for (float& v : pool) v = static_cast<float>(std::fabs(v - med));
+    const double s = small_median(pool.data(), pool.size()) / 0.6744897501960817;
+    // The sample relative variance of a skewed law is biased low: E[r^] ~ r (1 - r) for a
+    // gamma law (skewness 2 sqrt(r N)); 1 + r undoes it to first order.
+    const double r = std::exp(std::min(med + 0.5 * s * s, 700.0));
+    e.r = r * (1.0 + std::min(r, 1.0));
+    e.nu = s > 0 ? 4.0 * n / (3.141592653589793 * s * s) : HUGE_VAL;
+    return e;
+}
+
+// The statistic for the half whose level is hi against lo (hi > lo > 0), with r~ = r:
+// T = sqrt(m / 2) (sqrt(hi / lo) - sqrt(lo / hi)), m = 1 / r. The square roots are taken
+// separately so that 1e30 against 1e-3 stays finite.
+inline double pair_statistic(double hi, double lo, double r) noexcept {
+    const double s = std::sqrt(hi) / std::sqrt(lo) - std::sqrt(lo) / std::sqrt(hi);
+    return std::sqrt(0.5 / r) * s;
+}
+
+}  // namespace detail
+
+// Runs the local test on both halves. Views must share size, channel counts as for
+// check_half_views. Returns the first problem found; result is then empty.
+template <class T>
+status local_test(const local_half<T>& a, const local_half<T>& b, const local_test_options& options,
+                  local_test_scratch& scratch, local_test_result& result) {
+    for (auto& f : result.half) {
+        f.index.clear();
+        f.score.clear();
+    }
+    result.tested = result.screened = 0;
+    if (status st = check_local_test_options(options); !st.ok()) return st;
+    if (status st = check_half_views(a.color, a.variance, a.alpha); !st.ok()) return st;
+    if (status st = check_half_views(b.color, b.variance, b.alpha); !st.ok()) return st;
+    if (!same_size(a.color, b.color)) return status{errc::size_mismatch, "local test: the halves differ in size"};
+    if (a.color.pixel_count() >= (std::size_t{1} << 32))
+        return status{errc::size_overflow, "local test: more than 2^32 pixels"};
+    detail::local_levels(a, options.variance_scale, scratch.level[0], scratch.log_r[0]);
+    detail::local_levels(b, options.variance_scale, scratch.level[1], scratch.log_r[1]);
+    const int w = a.color.width(), h = a.color.height();
+    const double zq = normal_upper_quantile(options.false_alarm);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+            const double la = scratch.level[0][i], lb = scratch.level[1][i];
+            const float ra = scratch.log_r[0][i], rb = scratch.log_r[1][i];
+            if (!(ra == ra) || !(rb == rb)) continue;  // one half does not count, or not > 0
+            ++result.tested;
+            if (la == lb) continue;
+            const int hi = la > lb ? 0 : 1;  // the half that could hold a firefly
+            const double l_hi = hi == 0 ? la : lb, l_lo = hi == 0 ? lb : la;
+            const double r_other = std::exp(static_cast<double>(hi == 0 ? rb : ra));
+            // Screen: r~ >= r_other and t_{2m}(q) >= z_q bound T from above.
+            if (!(detail::pair_statistic(l_hi, l_lo, r_other) > zq)) continue;
+            ++result.screened;
+            const detail::pooled_estimate pooled = detail::pooled_relative_variance(
+                scratch.log_r, w, h, x, y, options.radius, options.min_neighbours, scratch.pool);
+            if (!(pooled.nu == pooled.nu)) continue;
+            const double r = std::max(pooled.r, r_other);
+            const double t = detail::pair_statistic(l_hi, l_lo, r);
+            if (!(t > zq)) continue;
+            // t with 2m degrees of freedom for the gamma law, widened by the uncertainty of r~
+            const double df = std::min(std::max(1.0 / (0.5 * r + 1.0 / pooled.nu), 1.0), 1e10);
+            const double threshold = student_t_upper_quantile(options.false_alarm, df);
+            if (!(t > threshold)) continue;
+            const double score = std::min(t / threshold, static_cast<double>(std::numeric_limits<float>::max()));
+            result.half[hi].index.push_back(static_cast<std::uint32_t>(i));
+            result.half[hi].score.push_back(static_cast<float>(score));
+        }
+    return ok_status();
+}
+
+}  // namespace firefly
