@@ -22,6 +22,7 @@
 #include <cstdint>
 #include <cstring>
 #include <memory>
+#include <mutex>
 #include <numeric>
 #include <unordered_map>
 #include <vector>
@@ -69,7 +70,7 @@ inline double esd_lambda(std::size_t k, double alpha, bool two_sided = false,
 
 // Lambdas computed once and reused, in chunks of 64 consecutive k per (alpha, sidedness,
 // method). Values are stored unrounded: neighbouring k differ in the 9th digit at n = 1e8.
-// Not thread-safe; the detector fills it from one thread.
+// Shared by several detectors through std::shared_ptr; see mutex().
 class lambda_cache {
 public:
     double get(std::size_t k, double alpha, bool two_sided = false,
@@ -108,6 +109,9 @@ public:
         tables_.clear();
         computed_ = hits_ = 0;
     }
+    // get() is not thread-safe by itself: detectors that share one cache (one per thread in a
+    // farm process) hold this lock while they read and fill it.
+    std::mutex& mutex() const noexcept { return mutex_; }
 
 private:
     struct chunk {
@@ -133,6 +137,7 @@ private:
     std::vector<table> tables_;  // few: one per (alpha, sidedness, method) in use
     std::size_t computed_ = 0;
     std::size_t hits_ = 0;
+    mutable std::mutex mutex_;
 };
 
 struct [[nodiscard]] esd_result {

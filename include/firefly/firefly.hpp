@@ -12,6 +12,8 @@
 #include "bound.hpp"
 #include "esd.hpp"
 #include "highlight.hpp"
+#include "kernel.hpp"
 #include "reconstruct.hpp"
+#include "cross_half.hpp"
 #include "parallel.hpp"
 #include "pipeline.hpp"

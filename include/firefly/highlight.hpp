@@ -69,6 +69,23 @@ inline bool exceeds_other_half(const highlight_options& o, double l_out, double 
 
 inline constexpr double chi2_1_median = 0.45493642311957184;
 
+namespace detail {
+// The least m with P(Binomial(n, q) >= m) < p: how many of n neighbours must share a property
+// of density q before chance stops explaining it (n + 1 when no count is enough).
+inline int binomial_tail_count(int n, double q, double p) noexcept {
+    q = std::clamp(q, 0.0, 1.0);
+    double tail = 0.0;  // P(M >= m), accumulated from m = n downwards
+    for (int m = n; m >= 0; --m) {
+        double term = 1.0;  // C(n, m) q^m (1 - q)^(n - m)
+        for (int k = 0; k < m; ++k) term *= static_cast<double>(n - k) / static_cast<double>(k + 1) * q;
+        for (int k = 0; k < n - m; ++k) term *= 1.0 - q;
+        if (tail + term >= p) return m + 1;
+        tail += term;
+    }
+    return 0;
+}
+}  // namespace detail
+
 // The factor that turns the renderer's variance into a variance of the pixel mean: the
 // median of (A_c - B_c)^2 / (vA_c + vB_c) over ordinary pixels, over chi2_1_median.
 class variance_calibration {

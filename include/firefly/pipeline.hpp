@@ -1,15 +1,20 @@
 // firefly: the whole pipeline over the two half buffers of a frame, and the detector object a
-// renderer's denoise stage keeps from frame to frame (it owns the lambda cache and the
-// scratch memory, so the second half buffer and every later frame reuse both).
+// renderer's denoise stage keeps from frame to frame (it owns the scratch memory and a lambda
+// cache it may share with other detectors, so the second half buffer and every later frame
+// reuse both).
 //
 //   per half      variance -> standard deviation; modified Z-score bound; one-sided
 //                 generalized ESD on the standard deviations (top values from the pixels
 //                 above the bound's cutoff, statistics built from the bottom up)
 //   across halves the highlight check: an outlier in both halves may be kept (highlight_rule)
-//   per half      two-phase reconstruction of fireflies and non-finite pixels, in place
+//   across halves a pixel bad in one half only is rebuilt from the other half at the same
+//                 pixel, blended with the spatial estimate where that lowers the frame's
+//                 expected error (cross_half.hpp)
+//   per half      two-phase spatial reconstruction of what is bad in both halves, in place
 //
-// Halves run as two tasks on the executor; they write disjoint memory, and the lambda
-// cache is filled between the two parallel stages, so every executor gives the same bytes.
+// Stages run as tasks on the executor; each writes disjoint memory, every cross-half value
+// is computed before any is written, and the lambda cache is filled between the parallel
+// stages, so every executor gives the same bytes.
 #pragma once
 
 #include <algorithm>
@@ -18,9 +23,13 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#include <memory>
+#include <mutex>
+#include <type_traits>
 #include <vector>
 
 #include "bound.hpp"
+#include "cross_half.hpp"
 #include "esd.hpp"
 #include "highlight.hpp"
 #include "image_view.hpp"
@@ -32,13 +41,25 @@
 
 namespace firefly {
 
-// One half buffer: colour (1 to 4 channels; the first three are colour, all are
-// reconstructed), its variance (1 channel, or one per colour channel) and optional alpha.
-template <class T>
+// One half buffer: colour (1 to 4 channels; the first three are colour, a 4th is carried
+// along: checked for NaN/Inf and rebuilt with the rest, never taken as coverage), its
+// variance (1 channel, or one per colour channel) and optional alpha (coverage; pixels with
+// alpha <= 0 are left out of the statistics). Each may have its own channel type: float
+// colour with half-float or double variance, alpha in a buffer of its own type. To use the
+// 4th channel of an RGBA image as alpha: `hb.alpha = rgba.channel_range(3, 1).value();`.
+// Const colour and variance views can be given to detector::detect(), which changes nothing.
+template <class C, class V = C, class A = const std::remove_const_t<C>>
 struct half_buffer {
-    image_view<T> color;
-    image_view<T> variance;
-    image_view<const T> alpha;  // empty: no alpha
+    image_view<C> color;
+    image_view<V> variance;
+    image_view<A> alpha;  // empty: no alpha
+};
+
+// What replaces a firefly.
+enum class rebuild_source : std::uint8_t {
+    other_half,  // the other half's value at the same pixel where it is usable, blended with
+                 // the spatial estimate where that lowers the expected error; spatial else
+    spatial,     // the paper: the spatial (Gaussian) estimate from the pixel's own half only
 };
 
 struct detector_options {
@@ -48,6 +69,9 @@ struct detector_options {
     lambda_method lambdas = lambda_method::exact;
     highlight_options highlight{};
     reconstruct_options reconstruction{};
+    rebuild_source rebuild = rebuild_source::other_half;
+    bool blend_spatial = true;          // other_half: blend in the spatial estimate (false:
+                                        // the other half's value alone)
     bool reconstruct = true;            // false: detect and report only, change nothing
 };
 
@@ -56,6 +80,11 @@ inline status check_options(const detector_options& o) noexcept {
         return status{errc::invalid_argument, "alpha must lie in (0, 1)"};
     if (!(o.bound_threshold >= 0.0) || !std::isfinite(o.bound_threshold))
         return status{errc::invalid_argument, "bound threshold must be finite and >= 0"};
+    if (static_cast<unsigned>(o.reduction) > static_cast<unsigned>(variance_reduction::max) ||
+        static_cast<unsigned>(o.lambdas) > static_cast<unsigned>(lambda_method::normal) ||
+        static_cast<unsigned>(o.highlight.rule) > static_cast<unsigned>(highlight_rule::confident_and_agree) ||
+        static_cast<unsigned>(o.rebuild) > static_cast<unsigned>(rebuild_source::spatial))
+        return status{errc::invalid_argument, "an enum option holds a value outside its enumerators"};
     if (!(o.highlight.max_ratio >= 1.0) || !(o.highlight.max_relative_error >= 0.0) ||
         !(o.highlight.min_excess_z >= 0.0) || !(o.highlight.cluster_relative_error >= 0.0))
         return status{errc::invalid_argument,
@@ -65,11 +94,14 @@ inline status check_options(const detector_options& o) noexcept {
 
 // Bits of the optional per-pixel masks.
 namespace mask_bits {
-inline constexpr std::uint8_t firefly = 1;    // outlier reconstructed
+inline constexpr std::uint8_t firefly = 1;    // outlier rebuilt
 inline constexpr std::uint8_t highlight = 2;  // outlier in both halves, kept
 inline constexpr std::uint8_t nonfinite = 4;  // NaN/Inf repaired
 inline constexpr std::uint8_t consistent = 8; // outlier in one half, but within the noise of
                                               // the other half: kept (min_excess_z)
+inline constexpr std::uint8_t other_half = 16;// rebuilt from the other half's value at this
+                                              // pixel (with firefly or nonfinite): the halves
+                                              // are correlated here
 }  // namespace mask_bits
 
 struct half_report {
@@ -84,19 +116,21 @@ struct half_report {
     std::size_t outliers = 0;           // generalized ESD outliers
     std::size_t highlights = 0;         // outliers kept (outlier in both halves)
     std::size_t consistent = 0;         // outliers kept (within the other half's noise)
-    std::size_t fireflies = 0;          // outliers reconstructed
-    std::size_t repaired = 0;           // non-finite pixels reconstructed
+    std::size_t fireflies = 0;          // outliers to rebuild (rebuilt unless reconstruct = false)
+    std::size_t repaired = 0;           // non-finite pixels rebuilt
+    std::size_t from_other_half = 0;    // of the rebuilt pixels, those taken from the other half
+    std::size_t unreachable = 0;        // pixels to rebuild that no usable source could reach
     int phase1_rounds = 0;
     int phase2_iterations = 0;
     double final_change = 0.0;
-    status reconstruction{};            // no_valid_pixels when nothing could be read
+    status reconstruction{};            // no_valid_pixels when pixels were left unreachable
 };
 
 struct [[nodiscard]] frame_report {
     // True when the frame was checked and every pixel that needed it was rebuilt.
     bool ok() const noexcept { return error.ok(); }
     status error{};                     // why not ok(): inputs or options refused, or pixels
-                                        // left without a usable source
+                                        // left without a usable source (they keep their values)
     half_report half[2];
     std::size_t both_outliers = 0;      // pixels that are outliers in both halves
     double variance_calibration = 1.0;  // variance -> variance of the mean (highlight rule)
@@ -106,74 +140,59 @@ struct [[nodiscard]] frame_report {
 
 class detector {
 public:
-    explicit detector(detector_options options = {}, executor exec = {})
-        : options_(options), exec_(std::move(exec)) {}
+    // lambdas: a cache shared with other detectors (one per thread, say); null: its own.
+    explicit detector(detector_options options = {}, executor exec = {},
+                      std::shared_ptr<lambda_cache> lambdas = nullptr)
+        : options_(options), exec_(std::move(exec)),
+          cache_(lambdas ? std::move(lambdas) : std::make_shared<lambda_cache>()) {}
 
     const detector_options& options() const noexcept { return options_; }
     void set_options(const detector_options& o) { options_ = o; }
     void set_executor(executor e) { exec_ = std::move(e); }
-    lambda_cache& lambdas() noexcept { return cache_; }
+    lambda_cache& lambdas() noexcept { return *cache_; }
+    // The cache, to hand to another detector.
+    const std::shared_ptr<lambda_cache>& shared_lambdas() const noexcept { return cache_; }
 
     std::size_t scratch_bytes() const noexcept {
-        std::size_t n = cache_.bytes();
+        std::size_t n = cache_->bytes();
         for (const auto& h : halves_)
             n += h.sd.capacity() * sizeof(float) + h.label.capacity() +
                  h.hist.bytes() + h.select_f.capacity() * sizeof(float) +
                  h.select.capacity() * sizeof(double) + h.order.capacity() * sizeof(std::uint32_t) +
                  h.removed.capacity() * sizeof(double) + h.keys.capacity() * sizeof(std::uint64_t) +
-                 h.recon.bytes();
+                 (h.fix.capacity() + h.cross.capacity()) * sizeof(std::uint32_t) +
+                 h.cross_values.capacity() * sizeof(double) + h.recon.bytes();
         return n;
     }
 
     // Cleans both halves in place and reports. mask_a / mask_b (optional, 1 channel, the
     // frame's size) receive mask_bits per pixel.
-    template <class T>
-    frame_report process(const half_buffer<T>& a, const half_buffer<T>& b,
+    template <class C, class V, class A>
+    frame_report process(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b,
                          const image_view<std::uint8_t>& mask_a = {},
                          const image_view<std::uint8_t>& mask_b = {}) {
-        static_assert(!std::is_const_v<T>, "process() cleans the half buffers in place");
-        frame_report rep;
-        const half_buffer<T>* hb[2] = {&a, &b};
-        const image_view<std::uint8_t>* masks[2] = {&mask_a, &mask_b};
-        if (status st = check_options(options_); !st.ok()) return fail(rep, st);
-        for (int h = 0; h < 2; ++h) {
-            if (status st = check_half_views(hb[h]->color, hb[h]->variance, hb[h]->alpha); !st.ok())
-                return fail(rep, st);
-            if (hb[h]->color.channels() > 4)
-                return fail(rep, status{errc::channel_mismatch, "colour needs 1 to 4 channels"});
-            if (!masks[h]->empty() && (!same_size(*masks[h], a.color) || masks[h]->channels() != 1))
-                return fail(rep, status{errc::size_mismatch, "a mask must be 1 channel, frame-sized"});
-        }
-        if (!same_size(a.color, b.color))
-            return fail(rep, status{errc::size_mismatch, "the two halves differ in size"});
-        if (a.color.channels() != b.color.channels() || a.variance.channels() != b.variance.channels())
-            return fail(rep, status{errc::channel_mismatch, "the two halves differ in channels"});
-        if (a.color.pixel_count() >= (std::size_t{1} << 32))
-            return fail(rep, status{errc::size_overflow, "more than 2^32 pixels"});
-        if (status st = check_no_aliasing(a, b, mask_a, mask_b); !st.ok()) return fail(rep, st);
+        static_assert(!std::is_const_v<C> && !std::is_const_v<V>,
+                      "process() cleans the half buffers in place: use detect() on const views");
+        return run(a, b, mask_a, mask_b, options_.reconstruct);
+    }
 
-        const std::size_t lambdas_before = cache_.computed();
-
-        // Stage 1 (parallel): standard deviations, bound, ESD candidates, per half.
-        exec_.run(2, [&](std::size_t h) { detect_candidates(*hb[h], halves_[h], rep.half[h]); });
-        // Stage 2 (serial): the ESD decision, reading and filling the shared lambda cache.
-        for (int h = 0; h < 2; ++h) decide(halves_[h], rep.half[h]);
-        // Stage 3: the highlight check across halves.
-        check_highlights(a, b, rep);
-        // Stage 4 (parallel): reconstruction, masks.
-        exec_.run(2, [&](std::size_t h) { finish(*hb[h], halves_[h], *masks[h], rep.half[h]); });
-
-        rep.lambdas_computed = cache_.computed() - lambdas_before;
-        rep.scratch_bytes = scratch_bytes();
-        return rep;
+    // Detection only: the report and the masks (what process() would rebuild is marked
+    // firefly / nonfinite), nothing written to the half buffers, which may be const.
+    template <class C, class V, class A>
+    frame_report detect(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b,
+                        const image_view<std::uint8_t>& mask_a = {},
+                        const image_view<std::uint8_t>& mask_b = {}) {
+        return run(a, b, mask_a, mask_b, false);
     }
 
 private:
     // Label byte: pixel_class in the low two bits, then these flags.
+    static constexpr std::uint8_t strict_bit = 4;       // highlight check, transient
     static constexpr std::uint8_t outlier_bit = 8;
     static constexpr std::uint8_t highlight_bit = 16;
-    static constexpr std::uint8_t fix_bit = 32;
+    static constexpr std::uint8_t fix_bit = 32;          // rebuild spatially
     static constexpr std::uint8_t consistent_bit = 64;
+    static constexpr std::uint8_t other_half_bit = 128;  // rebuilt from the other half
 
     struct half_state {
         std::vector<float> sd;
@@ -186,44 +205,102 @@ private:
         std::vector<double> removed;         // their standard deviations
         summary rest;                        // summary of the valid pixels never removed
         std::size_t valid = 0;
+        std::vector<std::uint32_t> fix;      // pixels to rebuild, row-major
+        std::vector<std::uint32_t> cross;    // those rebuilt from the other half
+        std::vector<double> cross_values;    // their new values, entry x channel
         reconstruct_scratch recon;
     };
-
-    // Every view process() writes must be apart from every other view it reads or writes:
-    // the halves run on two threads, and a pixel read after it was rebuilt would change results.
-    template <class T>
-    static status check_no_aliasing(const half_buffer<T>& a, const half_buffer<T>& b,
-                                    const image_view<std::uint8_t>& ma, const image_view<std::uint8_t>& mb) {
-        const image_view<const T> written[4] = {a.color, a.variance, b.color, b.variance};
-        const image_view<const std::uint8_t> masks[2] = {ma, mb};
-        for (int i = 0; i < 4; ++i) {
-            for (int j = i + 1; j < 4; ++j)
-                if (views_may_overlap(written[i], written[j]))
-                    return status{errc::aliased_views, "colour and variance views of the two halves must not share memory"};
-            if (views_may_overlap(written[i], a.alpha) || views_may_overlap(written[i], b.alpha))
-                return status{errc::aliased_views, "an alpha view shares memory with a colour or variance view"};
-            for (const auto& m : masks)
-                if (views_may_overlap(written[i], m))
-                    return status{errc::aliased_views, "a mask shares memory with a colour or variance view"};
-        }
-        if (views_may_overlap(masks[0], masks[1]) || views_may_overlap(masks[0], a.alpha) ||
-            views_may_overlap(masks[0], b.alpha) || views_may_overlap(masks[1], a.alpha) ||
-            views_may_overlap(masks[1], b.alpha))
-            return status{errc::aliased_views, "the masks must not share memory with each other or with alpha"};
-        return ok_status();
-    }
 
     static frame_report& fail(frame_report& r, status st) {
         r.error = st;
         return r;
     }
-
     static std::uint8_t cls(std::uint8_t label) noexcept { return label & pixel_class_bits; }
     static constexpr std::uint8_t valid_class = static_cast<std::uint8_t>(pixel_class::valid);
     static constexpr std::uint8_t nonfinite_class = static_cast<std::uint8_t>(pixel_class::nonfinite);
+    static std::size_t index(int x, int y, int w) noexcept {
+        return static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+    }
 
-    template <class T>
-    void detect_candidates(const half_buffer<T>& hb, half_state& s, half_report& r) {
+    template <class C, class V, class A>
+    frame_report run(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b,
+                     const image_view<std::uint8_t>& mask_a, const image_view<std::uint8_t>& mask_b, bool clean) {
+        frame_report rep;
+        if (status st = check_inputs(a, b, mask_a, mask_b); !st.ok()) return fail(rep, st);
+        const half_buffer<C, V, A>* hb[2] = {&a, &b};
+        const image_view<std::uint8_t>* masks[2] = {&mask_a, &mask_b};
+        // Stage 1 (parallel): standard deviations, bound, ESD candidates, per half.
+        exec_.run(2, [&](std::size_t h) { detect_candidates(*hb[h], halves_[h], rep.half[h]); });
+        // Stage 2 (serial): the ESD decision, reading and filling the lambda cache.
+        {
+            const std::lock_guard<std::mutex> lock(cache_->mutex());
+            const std::size_t before = cache_->computed();
+            for (int h = 0; h < 2; ++h) decide(halves_[h], rep.half[h]);
+            rep.lambdas_computed = cache_->computed() - before;
+        }
+        // Stage 3: the highlight check across halves.
+        check_highlights(a, b, rep);
+        // Stage 4 (parallel): what to rebuild; then the other half's estimates, all computed
+        // before any is written; then writes, spatial reconstruction and masks.
+        exec_.run(2, [&](std::size_t h) { mark_fixes(halves_[h], rep.half[h]); });
+        const bool cross = clean && options_.rebuild == rebuild_source::other_half;
+        if (cross)
+            exec_.run(2, [&](std::size_t h) { stage_cross_half(*hb[h], *hb[1 - h], halves_[h], halves_[1 - h], rep); });
+        exec_.run(2, [&](std::size_t h) { finish(*hb[h], halves_[h], *masks[h], rep.half[h], clean, cross); });
+        for (const half_report& hr : rep.half)
+            if (!hr.reconstruction.ok()) rep.error = hr.reconstruction;
+        if (clean && rep.half[0].valid + rep.half[1].valid == 0 && rep.half[0].nonfinite + rep.half[1].nonfinite > 0)
+            rep.error = status{errc::no_valid_pixels, "no usable pixel in either half"};
+        rep.scratch_bytes = scratch_bytes();
+        return rep;
+    }
+
+    template <class C, class V, class A>
+    status check_inputs(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b,
+                        const image_view<std::uint8_t>& mask_a, const image_view<std::uint8_t>& mask_b) const {
+        if (status st = check_options(options_); !st.ok()) return st;
+        const half_buffer<C, V, A>* hb[2] = {&a, &b};
+        const image_view<std::uint8_t>* masks[2] = {&mask_a, &mask_b};
+        for (int h = 0; h < 2; ++h) {
+            if (status st = check_half_views(hb[h]->color, hb[h]->variance, hb[h]->alpha); !st.ok()) return st;
+            if (hb[h]->color.channels() > 4)
+                return status{errc::channel_mismatch, "colour needs 1 to 4 channels"};
+            if (!masks[h]->empty() && (!same_size(*masks[h], a.color) || masks[h]->channels() != 1))
+                return status{errc::size_mismatch, "a mask must be 1 channel, frame-sized"};
+        }
+        if (!same_size(a.color, b.color)) return status{errc::size_mismatch, "the two halves differ in size"};
+        if (a.color.channels() != b.color.channels() || a.variance.channels() != b.variance.channels())
+            return status{errc::channel_mismatch, "the two halves differ in channels"};
+        if (a.color.pixel_count() >= (std::size_t{1} << 32))
+            return status{errc::size_overflow, "more than 2^32 pixels"};
+        return check_no_aliasing(a, b, mask_a, mask_b);
+    }
+
+    // Every view process() writes must be apart from every other view it reads or writes:
+    // the halves run on two threads, and a pixel read after it was rebuilt would change results.
+    template <class C, class V, class A>
+    static status check_no_aliasing(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b,
+                                    const image_view<std::uint8_t>& ma, const image_view<std::uint8_t>& mb) {
+        if (views_may_overlap(a.color, b.color) || views_may_overlap(a.color, b.variance) ||
+            views_may_overlap(a.variance, b.color) || views_may_overlap(a.variance, b.variance) ||
+            views_may_overlap(a.color, a.variance) || views_may_overlap(b.color, b.variance))
+            return status{errc::aliased_views, "colour and variance views of the two halves must not share memory"};
+        const half_buffer<C, V, A>* hb[2] = {&a, &b};
+        for (const auto* h : hb) {
+            for (const auto* o : hb)
+                if (views_may_overlap(h->color, o->alpha) || views_may_overlap(h->variance, o->alpha))
+                    return status{errc::aliased_views, "an alpha view shares memory with a colour or variance view"};
+            for (const auto* m : {&ma, &mb})
+                if (views_may_overlap(h->color, *m) || views_may_overlap(h->variance, *m) ||
+                    views_may_overlap(h->alpha, *m))
+                    return status{errc::aliased_views, "a mask shares memory with another view"};
+        }
+        if (views_may_overlap(ma, mb)) return status{errc::aliased_views, "the two masks share memory"};
+        return ok_status();
+    }
+
+    template <class C, class V, class A>
+    void detect_candidates(const half_buffer<C, V, A>& hb, half_state& s, half_report& r) {
         const std::size_t n = hb.color.pixel_count();
         s.sd.resize(n);
         s.label.resize(n);
@@ -304,152 +381,266 @@ private:
         o.method = options_.lambdas;
         esd_result res;
         if (!s.order.empty())
-            detail::esd_from_removals(s.removed.data(), s.order.size(), s.rest, s.valid, o, cache_, res);
+            detail::esd_from_removals(s.removed.data(), s.order.size(), s.rest, s.valid, o, *cache_, res);
         r.outliers = res.outliers;
         for (std::size_t j = 0; j < res.outliers; ++j) s.label[s.order[j]] |= outlier_bit;
     }
 
-    template <class T>
-    void check_highlights(const half_buffer<T>& a, const half_buffer<T>& b, frame_report& rep) {
-        std::uint8_t* lab[2] = {halves_[0].label.data(), halves_[1].label.data()};
-        // Outliers come from the two lists, not from a pass over the frame.
-        std::vector<std::uint32_t>& pairs = pairs_;
-        pairs.clear();
+    // The factor that turns the given variance into a variance of the pixel mean, from
+    // (A - B)^2 / (vA + vB) over ordinary pixels on a lattice of about 16k pixels, whatever
+    // the resolution: a median of that many ratios is good to ~1%, and no one pixel moves it.
+    template <class C, class V, class A>
+    double calibrate(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b) {
+        const std::uint8_t* lab[2] = {halves_[0].label.data(), halves_[1].label.data()};
+        const int w = a.color.width(), hgt = a.color.height();
+        const int nc = colour_channels(a.color.channels()), nv = a.variance.channels();
+        calibration_.clear();
+        const double cells = static_cast<double>(w) * static_cast<double>(hgt) / 16384.0;
+        const int step = std::max(1, static_cast<int>(std::sqrt(cells)));
+        for (int y = step / 2; y < hgt; y += step)
+            for (int x = step / 2; x < w; x += step) {
+                const std::size_t i = index(x, y, w);
+                if (lab[0][i] != valid_class || lab[1][i] != valid_class) continue;
+                for (int c = 0; c < nc; ++c)
+                    calibration_.add(a.color.load(x, y, c), b.color.load(x, y, c),
+                                     a.variance.load(x, y, nv == 1 ? 0 : c), b.variance.load(x, y, nv == 1 ? 0 : c));
+            }
+        return calibration_.factor();
+    }
+
+    template <class C>
+    static double mean_colour(const image_view<C>& v, int x, int y) {
+        const int nc = colour_channels(v.channels());
+        double s = 0;
+        for (int c = 0; c < nc; ++c) s += v.load(x, y, c);
+        return s / nc;
+    }
+    template <class V>
+    double reduced_variance(const image_view<V>& v, int x, int y) const {
+        bool nonfinite = false, negative = false;
+        return detail::reduce_variance(&v(x, y, 0), v.channel_stride(), v.channels(), options_.reduction, nonfinite,
+                                       negative);
+    }
+
+    template <class C, class V, class A>
+    void check_highlights(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b, frame_report& rep) {
+        const std::uint8_t* lab1 = halves_[1].label.data();
+        pairs_.clear();  // outliers come from the two lists, not from a pass over the frame
         bool single = false;
         for (std::size_t j = 0; j < rep.half[0].outliers; ++j) {
             const std::uint32_t i = halves_[0].order[j];
-            if (lab[1][i] & outlier_bit) pairs.push_back(i);
+            if (lab1[i] & outlier_bit) pairs_.push_back(i);
             else single = true;
         }
-        single |= rep.half[1].outliers > pairs.size();
-        rep.both_outliers = pairs.size();
+        single |= rep.half[1].outliers > pairs_.size();
+        rep.both_outliers = pairs_.size();
+        // Calibrated whenever anything is decided or rebuilt, so no decision depends on
+        // whether an unrelated pixel elsewhere is an outlier.
+        if (pairs_.empty() && !single && rep.half[0].nonfinite + rep.half[1].nonfinite == 0) return;
+        rep.variance_calibration = calibrate(a, b);
+        decide_pairs(a, b, rep.variance_calibration);
+        if (single && options_.highlight.min_excess_z > 0) decide_singles(a, b, rep);
+    }
+
+    // Pixels that are outliers in both halves. A pair that passes the rule strictly is a
+    // highlight; a pair next to such a highlight is held to the looser cluster limit (a real
+    // highlight is a spot; pairs of fireflies meeting by chance are not, even side by side
+    // on a dense frame, since neither passes the strict limit).
+    template <class C, class V, class A>
+    void decide_pairs(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b, double calibration) {
+        std::uint8_t* lab[2] = {halves_[0].label.data(), halves_[1].label.data()};
         const highlight_options& ho = options_.highlight;
-        const bool check_single = single && ho.min_excess_z > 0;
-        if (pairs.empty() && !check_single) return;
-        const int w = a.color.width();
-        const int nc = colour_channels(a.color.channels());
-        const int nv = a.variance.channels();
-        const bool need_cal = check_single || ho.rule == highlight_rule::confident ||
-                              ho.rule == highlight_rule::confident_and_agree;
-        double calibration = 1.0;
-        if (need_cal) {
-            // (A - B)^2 / (vA + vB) over ordinary pixels on a lattice of about 16k pixels,
-            // whatever the resolution: a median of that many ratios is good to ~1%.
-            calibration_.clear();
-            const int hgt = a.color.height();
-            const double cells = static_cast<double>(w) * static_cast<double>(hgt) / 16384.0;
-            const int step = std::max(1, static_cast<int>(std::sqrt(cells)));
-            for (int y = step / 2; y < hgt; y += step)
-                for (int x = step / 2; x < w; x += step) {
-                    const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
-                    if (lab[0][i] != valid_class || lab[1][i] != valid_class) continue;
-                    for (int c = 0; c < nc; ++c)
-                        calibration_.add(a.color.load(x, y, c), b.color.load(x, y, c),
-                                         a.variance.load(x, y, nv == 1 ? 0 : c), b.variance.load(x, y, nv == 1 ? 0 : c));
-                }
-            calibration = calibration_.factor();
-        }
-        rep.variance_calibration = calibration;
-        const half_buffer<T>* hb[2] = {&a, &b};
-        auto mean_colour = [nc](const image_view<T>& v, int x, int y) {
-            double s = 0;
-            for (int c = 0; c < nc; ++c) s += v.load(x, y, c);
-            return s / nc;
-        };
-        auto reduced_variance = [this](const image_view<T>& v, int x, int y) {
-            bool nonfinite = false, negative = false;
-            return detail::reduce_variance(&v(x, y, 0), v.channel_stride(), v.channels(), options_.reduction,
-                                           nonfinite, negative);
-        };
-        const int hgt = a.color.height();
-        auto both = [&](int x, int y) {
-            const std::size_t j = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
-            return (lab[0][j] & outlier_bit) && (lab[1][j] & outlier_bit);
-        };
-        for (const std::uint32_t i : pairs) {
+        const int w = a.color.width(), hgt = a.color.height();
+        auto decide_pair = [&](std::uint32_t i, bool cluster) -> int {  // 0 no, 1 strict, 2 cluster
             const int x = static_cast<int>(i % static_cast<std::uint32_t>(w));
             const int y = static_cast<int>(i / static_cast<std::uint32_t>(w));
-            bool cluster = false;
-            for (int dy = -1; dy <= 1 && !cluster; ++dy)
-                for (int dx = -1; dx <= 1 && !cluster; ++dx)
-                    if ((dx || dy) && x + dx >= 0 && y + dy >= 0 && x + dx < w && y + dy < hgt)
-                        cluster = both(x + dx, y + dy);
             const double la = mean_colour(a.color, x, y), lb = mean_colour(b.color, x, y);
             const double va = reduced_variance(a.variance, x, y), vb = reduced_variance(b.variance, x, y);
-            if (!is_highlight(ho, la, lb, va, vb, calibration, cluster)) continue;  // both rebuilt
-            // A highlight. A firefly may still sit on top of it in one half: that half then
+            if (!is_highlight(ho, la, lb, va, vb, calibration, cluster)) return 0;
+            // A firefly may still sit on top of the highlight in one half: that half then
             // exceeds the other by far more than the noise, and only it is rebuilt.
             const bool a_over = ho.min_excess_z > 0 && exceeds_other_half(ho, la, lb, vb, calibration);
             const bool b_over = ho.min_excess_z > 0 && exceeds_other_half(ho, lb, la, va, calibration);
             if (!a_over) lab[0][i] |= highlight_bit;
             if (!b_over) lab[1][i] |= highlight_bit;
-        }
-        if (!check_single) return;
-        for (int h = 0; h < 2; ++h)
-            for (std::size_t j = 0; j < rep.half[h].outliers; ++j) {
-            const std::uint32_t i = halves_[h].order[j];
-            if (lab[1 - h][i] & outlier_bit) continue;  // a pair, decided above
-            if (cls(lab[1 - h][i]) == nonfinite_class) continue;  // nothing to compare with
+            return cluster ? 2 : 1;
+        };
+        for (const std::uint32_t i : pairs_)
+            if (decide_pair(i, false) == 1) lab[0][i] |= strict_bit;
+        // In a cluster: next to a strict highlight, or next to more pairs than the frame's
+        // density of pairs explains (binomial tail below 1e-3 for the neighbours it has).
+        int min_pairs[9];
+        const double q = static_cast<double>(pairs_.size()) /
+                         static_cast<double>(std::max<std::size_t>(1, halves_[0].valid + halves_[1].valid) / 2 + 1);
+        for (int n = 0; n <= 8; ++n) min_pairs[n] = detail::binomial_tail_count(n, q, 1e-3);
+        auto in_cluster = [&](std::uint32_t i) {
             const int x = static_cast<int>(i % static_cast<std::uint32_t>(w));
             const int y = static_cast<int>(i / static_cast<std::uint32_t>(w));
-            if (!exceeds_other_half(ho, mean_colour(hb[h]->color, x, y), mean_colour(hb[1 - h]->color, x, y),
-                                    reduced_variance(hb[1 - h]->variance, x, y), calibration))
-                lab[h][i] |= consistent_bit;
+            int neighbours = 0, pairs = 0;
+            for (int yy = std::max(0, y - 1); yy <= std::min(hgt - 1, y + 1); ++yy)
+                for (int xx = std::max(0, x - 1); xx <= std::min(w - 1, x + 1); ++xx) {
+                    if (xx == x && yy == y) continue;
+                    const std::size_t j = index(xx, yy, w);
+                    if (lab[0][j] & strict_bit) return true;
+                    ++neighbours;
+                    pairs += (lab[0][j] & outlier_bit) && (lab[1][j] & outlier_bit);
+                }
+            return pairs >= min_pairs[neighbours];
+        };
+        if (ho.cluster_relative_error > ho.max_relative_error)
+            for (const std::uint32_t i : pairs_)
+                if (!(lab[0][i] & strict_bit) && in_cluster(i)) (void)decide_pair(i, true);
+        for (const std::uint32_t i : pairs_) lab[0][i] &= static_cast<std::uint8_t>(~strict_bit);
+    }
+
+    // Outliers of one half only: kept when they do not stand out against the other half.
+    template <class C, class V, class A>
+    void decide_singles(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b, const frame_report& rep) {
+        std::uint8_t* lab[2] = {halves_[0].label.data(), halves_[1].label.data()};
+        const half_buffer<C, V, A>* hb[2] = {&a, &b};
+        const int w = a.color.width();
+        for (int h = 0; h < 2; ++h)
+            for (std::size_t j = 0; j < rep.half[h].outliers; ++j) {
+                const std::uint32_t i = halves_[h].order[j];
+                if (lab[1 - h][i] & outlier_bit) continue;            // a pair, decided above
+                if (cls(lab[1 - h][i]) == nonfinite_class) continue;  // nothing to compare with
+                const int x = static_cast<int>(i % static_cast<std::uint32_t>(w));
+                const int y = static_cast<int>(i / static_cast<std::uint32_t>(w));
+                if (!exceeds_other_half(options_.highlight, mean_colour(hb[h]->color, x, y),
+                                        mean_colour(hb[1 - h]->color, x, y),
+                                        reduced_variance(hb[1 - h]->variance, x, y), rep.variance_calibration))
+                    lab[h][i] |= consistent_bit;
             }
     }
 
-    template <class T>
-    void finish(const half_buffer<T>& hb, half_state& s, const image_view<std::uint8_t>& mask,
-                half_report& r) {
-        const std::size_t n = s.label.size();
+    // The pixels to rebuild: outliers not kept, and non-finite pixels (row-major list).
+    void mark_fixes(half_state& s, half_report& r) {
         std::uint8_t* label = s.label.data();
-        // Outliers: walk their list, not the frame.
-        std::size_t highlights = 0, consistent = 0, fireflies = 0;
+        s.fix.clear();
+        std::size_t highlights = 0, consistent = 0;
         for (std::size_t j = 0; j < r.outliers; ++j) {
             const std::uint32_t i = s.order[j];
-            const std::uint8_t l = label[i];
-            if (l & highlight_bit) {
-                ++highlights;
-            } else if (l & consistent_bit) {
-                ++consistent;
-            } else {
-                ++fireflies;
-                label[i] = static_cast<std::uint8_t>(l | fix_bit);
+            if (label[i] & highlight_bit) ++highlights;
+            else if (label[i] & consistent_bit) ++consistent;
+            else {
+                label[i] |= fix_bit;
+                s.fix.push_back(i);
             }
         }
         r.highlights = highlights;
         r.consistent = consistent;
-        r.fireflies = fireflies;
-        r.repaired = r.nonfinite;
-        if (r.nonfinite > 0)  // a byte-wise loop that vectorizes
-            for (std::size_t i = 0; i < n; ++i)
-                label[i] = static_cast<std::uint8_t>(label[i] | (((label[i] & pixel_class_bits) == nonfinite_class) ? fix_bit : 0));
-        if (options_.reconstruct) {
-            const reconstruct_report rr =
-                reconstruct(hb.color, hb.variance, label, options_.reconstruction, s.recon, fix_bit);
-            r.phase1_rounds = rr.phase1_rounds;
-            r.phase2_iterations = rr.phase2_iterations;
-            r.final_change = rr.final_change;
-            r.reconstruction = rr.error;
-        }
-        if (!mask.empty()) {
-            const int w = mask.width();
-            for (int y = 0; y < mask.height(); ++y)
-                for (int x = 0; x < w; ++x) {
-                    const std::uint8_t l = label[static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)];
-                    std::uint8_t m = 0;
-                    if ((l & outlier_bit) && !(l & (highlight_bit | consistent_bit))) m |= mask_bits::firefly;
-                    if (l & highlight_bit) m |= mask_bits::highlight;
-                    if (l & consistent_bit) m |= mask_bits::consistent;
-                    if (cls(l) == nonfinite_class) m |= mask_bits::nonfinite;
-                    mask(x, y) = m;
+        r.fireflies = s.fix.size();
+        if (r.nonfinite > 0)
+            for (std::size_t i = 0; i < s.label.size(); ++i)
+                if (cls(label[i]) == nonfinite_class) {
+                    label[i] |= fix_bit;
+                    s.fix.push_back(static_cast<std::uint32_t>(i));
                 }
+        std::sort(s.fix.begin(), s.fix.end());
+    }
+
+    // The other half's estimates of this half's pixels to rebuild, where the other half is
+    // usable there (finite, not itself to be rebuilt, covered). Reads both halves, writes
+    // nothing but s.cross / s.cross_values.
+    template <class C, class V, class A>
+    void stage_cross_half(const half_buffer<C, V, A>& own, const half_buffer<C, V, A>& other, half_state& s,
+                          const half_state& o, const frame_report& rep) {
+        s.cross.clear();
+        s.cross_values.clear();
+        const int w = own.color.width();
+        const int nch = own.color.channels() + own.variance.channels();
+        s.recon.kernel_.set(options_.reconstruction.kernel_width, options_.reconstruction.sigma);
+        const half_views<std::remove_const_t<C>, std::remove_const_t<V>> hv[2] = {{own.color, own.variance},
+                                                                               {other.color, other.variance}};
+        const std::uint8_t* lo = o.label.data();
+        const std::uint8_t* ls = s.label.data();
+        auto clean = [](std::uint8_t l) { return !(l & outlier_bit) && cls(l) != nonfinite_class; };
+        auto readable = [&](int xx, int yy) {
+            const std::size_t q = index(xx, yy, w);
+            return clean(ls[q]) && clean(lo[q]);
+        };
+        double out[8];
+        for (const std::uint32_t p : s.fix) {
+            const int x = static_cast<int>(p % static_cast<std::uint32_t>(w));
+            const int y = static_cast<int>(p / static_cast<std::uint32_t>(w));
+            if (cls(lo[p]) == nonfinite_class || (lo[p] & fix_bit)) continue;
+            if (!other.alpha.empty() && !(other.alpha.load(x, y) > 0)) continue;
+            (void)detail::cross_half_estimate(hv[0], hv[1], s.recon.kernel_, rep.variance_calibration,
+                                              options_.blend_spatial, x, y, readable, out);
+            s.cross.push_back(p);
+            s.cross_values.insert(s.cross_values.end(), out, out + nch);
         }
+    }
+
+    template <class C, class V, class A>
+    void finish(const half_buffer<C, V, A>& hb, half_state& s, const image_view<std::uint8_t>& mask, half_report& r,
+                bool clean, bool cross) {
+        if constexpr (!std::is_const_v<C> && !std::is_const_v<V>) {
+            if (clean) rebuild(hb, s, r, cross);
+        } else {
+            (void)hb, (void)cross;
+        }
+        if (!clean) r.repaired = 0;
+        if (!mask.empty()) write_mask(s, mask);
+    }
+
+    template <class C, class V, class A>
+    void rebuild(const half_buffer<C, V, A>& hb, half_state& s, half_report& r, bool cross) {
+        std::uint8_t* label = s.label.data();
+        const int w = hb.color.width();
+        const int nc = hb.color.channels(), nv = hb.variance.channels();
+        if (cross) {
+            for (std::size_t e = 0; e < s.cross.size(); ++e) {
+                const std::uint32_t p = s.cross[e];
+                const int x = static_cast<int>(p % static_cast<std::uint32_t>(w));
+                const int y = static_cast<int>(p / static_cast<std::uint32_t>(w));
+                const double* v = &s.cross_values[e * static_cast<std::size_t>(nc + nv)];
+                for (int c = 0; c < nc; ++c) hb.color.store(x, y, c, v[c]);
+                for (int c = 0; c < nv; ++c) hb.variance.store(x, y, c, v[nc + c]);
+                label[p] = static_cast<std::uint8_t>((label[p] & ~fix_bit) | other_half_bit);
+            }
+            r.from_other_half = s.cross.size();
+        }
+        // Spatially: what is bad in both halves (or everything, with rebuild = spatial).
+        // Sources exclude every outlier and non-finite pixel not rebuilt from the other half.
+        auto role = [](std::uint8_t m) {
+            if (m & fix_bit) return pixel_role::rebuild;
+            if (m & other_half_bit) return pixel_role::source;
+            if ((m & outlier_bit) || cls(m) == nonfinite_class) return pixel_role::excluded;
+            return pixel_role::source;
+        };
+        constexpr std::uint8_t interesting = fix_bit | other_half_bit | outlier_bit | nonfinite_class;
+        const reconstruct_report rr =
+            reconstruct(hb.color, hb.variance, label, options_.reconstruction, s.recon, interesting, role);
+        r.phase1_rounds = rr.phase1_rounds;
+        r.phase2_iterations = rr.phase2_iterations;
+        r.final_change = rr.final_change;
+        r.reconstruction = rr.error;
+        r.unreachable = rr.unreachable;
+        std::size_t repaired = 0;
+        for (const std::uint32_t p : s.fix)  // unreachable pixels are still marked pending
+            repaired += cls(label[p]) == nonfinite_class && !((label[p] & fix_bit) && s.recon.state_[p] == 1);
+        r.repaired = repaired;
+    }
+
+    static void write_mask(const half_state& s, const image_view<std::uint8_t>& mask) {
+        const int w = mask.width();
+        for (int y = 0; y < mask.height(); ++y)
+            for (int x = 0; x < w; ++x) {
+                const std::uint8_t l = s.label[index(x, y, w)];
+                std::uint8_t m = 0;
+                if ((l & outlier_bit) && !(l & (highlight_bit | consistent_bit))) m |= mask_bits::firefly;
+                if (l & highlight_bit) m |= mask_bits::highlight;
+                if (l & consistent_bit) m |= mask_bits::consistent;
+                if (cls(l) == nonfinite_class) m |= mask_bits::nonfinite;
+                if (l & other_half_bit) m |= mask_bits::other_half;
+                mask(x, y) = m;
+            }
     }
 
     detector_options options_;
     executor exec_;
-    lambda_cache cache_;
+    std::shared_ptr<lambda_cache> cache_;
     half_state halves_[2];
     variance_calibration calibration_;
     std::vector<std::uint32_t> pairs_;

@@ -2,23 +2,27 @@
 //
 // Each marked pixel becomes the Gaussian-weighted mean of its neighbours in a square kernel
 // (5 pixels wide by default), colour and variance alike; the kernel is renormalised over
-// the neighbours that may be read, so borders and corners need no special case.
+// the neighbours that may be read, so borders and corners need no special case. Pixels a
+// role marks `excluded` (outliers that are kept, like highlights) are never read.
 //
 //   phase 1  gives every marked pixel a first value, in rounds. A round reads only pixels
-//            known when it began (unmarked ones, and marked ones set by earlier rounds), so
-//            a cluster wider than the kernel fills from its rim inwards, the same from every
-//            side: no scan order, no directional bias (the paper's "2 2 x x 8 8").
-//   phase 2  Jacobi iterations over the marked pixels that have marked neighbours, now
-//            reading every neighbour, until the largest relative change is below a
-//            tolerance or an iteration cap is reached.
+//            known when it began (sources, and marked ones set by earlier rounds), so a
+//            cluster wider than the kernel fills from its rim inwards, the same from every
+//            side: no scan order, no directional bias (the paper's "2 2 x x 8 8"). Round
+//            r + 1 looks only at the marked pixels next to those set in round r (a frontier),
+//            so a cluster costs time in proportion to its area, not its area times width.
+//   phase 2  Jacobi iterations, now reading every neighbour, over an active set: at first
+//            the marked pixels with marked neighbours, then only those next to a pixel that
+//            changed by more than the tolerance (relative) in the last iteration. Converged
+//            regions stop costing time while a large cluster's interior still settles;
+//            each iteration reads only values of the one before, so the result depends on
+//            neither scan order nor thread count. Capped at max_iterations.
 //
-// Exact symmetry: the kernel's offsets fall into classes that the 8 flips/transposes of the
-// square permute among themselves with equal weights. Each class is listed as opposite pairs
-// (m, -m) and summed as the tree ((P1 + P2) + (P3 + P4)) of pair sums P = v(m) + v(-m): every
-// flip or transpose only swaps operands of some + in that tree (the 180-degree turn fixes
-// each pair; the rest of the group permutes the pairs as the Klein four-group, which keeps
-// the pairing {P1, P2}, {P3, P4}), and + is commutative, so a flipped or transposed input
-// gives a bit-identical (flipped) output with no sorting.
+// A marked pixel that no source can reach (its whole neighbourhood, transitively, is marked
+// or excluded) keeps its values and is reported (unreachable, no_valid_pixels).
+//
+// Exact symmetry: the weighted sums are kernel.hpp's flip-exact trees, so a flipped or
+// transposed input gives a bit-identical (flipped) output.
 #pragma once
 
 #include <algorithm>
@@ -30,6 +34,7 @@
 #include <vector>
 
 #include "image_view.hpp"
+#include "kernel.hpp"
 #include "status.hpp"
 
 namespace firefly {
@@ -60,35 +65,90 @@ inline status check_reconstruct_options(const reconstruct_options& o) noexcept {
     return ok_status();
 }
 
+// What reconstruction does with a pixel.
+enum class pixel_role : std::uint8_t {
+    source = 0,    // read by its neighbours, never changed
+    rebuild = 1,   // marked: gets the weighted mean of its readable neighbours
+    excluded = 3,  // neither read nor changed
+};
+
 // Memory reused across calls (and frames).
 class reconstruct_scratch {
 public:
     std::size_t bytes() const noexcept {
-        return state_.capacity() + list_.capacity() * sizeof(std::uint32_t) +
-               staged_.capacity() * sizeof(double) + ready_.capacity();
+        return state_.capacity() + (list_.capacity() + next_.capacity()) * sizeof(std::uint32_t) +
+               staged_.capacity() * sizeof(double);
     }
 
     // Internal state of reconstruct(); public only so the function template can reach it.
-    struct kernel_class {
-        double weight;
-        int count;
-        int dx[8], dy[8];
-    };
-    std::vector<kernel_class> classes_;
-    int classes_width_ = 0;
-    double classes_sigma_ = 0;
-    std::vector<std::uint8_t> state_;   // per pixel: 0 source, 1 marked, 2 marked + known
-    std::vector<std::uint32_t> list_;   // marked pixels, row-major order
+    detail::gaussian_kernel kernel_;
+    // Per pixel: 0 source, 1 marked, 2 marked and known, 3 excluded; | queued when listed
+    // for the next round or iteration.
+    std::vector<std::uint8_t> state_;
+    std::vector<std::uint32_t> list_;   // marked pixels of this round / iteration
+    std::vector<std::uint32_t> next_;   // those of the next one
     std::vector<double> staged_;        // new values, list entry x channel
-    std::vector<std::uint8_t> ready_;   // staged this round
+    static constexpr std::uint8_t queued = 0x80;
 };
 
-// Reconstructs the pixels i (row-major, i = y * width + x) with (mask[i] & bits) != 0 in
-// colour and, when not empty, variance. Every other pixel is left bit-identical.
-template <class C, class V>
+namespace detail {
+
+// The marked pixels of a role map: scans `interesting` bytes of mask eight at a time
+// (marked pixels are rare) and asks role() only about those.
+template <class Role>
+void mark_roles(const std::uint8_t* mask, std::size_t npix, std::uint8_t interesting, Role&& role,
+                reconstruct_scratch& s) {
+    s.state_.assign(npix, 0);
+    s.list_.clear();
+    auto visit = [&](std::size_t k) {
+        const pixel_role r = role(mask[k]);
+        s.state_[k] = static_cast<std::uint8_t>(r);
+        if (r == pixel_role::rebuild) s.list_.push_back(static_cast<std::uint32_t>(k));
+    };
+    const std::uint64_t wide = 0x0101010101010101ull * interesting;
+    std::size_t i = 0;
+    for (; i + 8 <= npix; i += 8) {
+        std::uint64_t word;
+        std::memcpy(&word, mask + i, 8);
+        if (!(word & wide)) continue;
+        for (std::size_t k = i; k < i + 8; ++k)
+            if (mask[k] & interesting) visit(k);
+    }
+    for (; i < npix; ++i)
+        if (mask[i] & interesting) visit(i);
+}
+
+// Adds to s.next_ the marked pixels (state `want`) within the kernel of pixel p, once each.
+inline void queue_neighbours(std::size_t p, int w, int h, int r, std::uint8_t want, reconstruct_scratch& s) {
+    const int x = static_cast<int>(p % static_cast<std::size_t>(w));
+    const int y = static_cast<int>(p / static_cast<std::size_t>(w));
+    for (int yy = std::max(0, y - r); yy <= std::min(h - 1, y + r); ++yy)
+        for (int xx = std::max(0, x - r); xx <= std::min(w - 1, x + r); ++xx) {
+            if (xx == x && yy == y) continue;  // a value depends on its neighbours only
+            const std::size_t q = static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(xx);
+            if (s.state_[q] != want) continue;
+            s.state_[q] = static_cast<std::uint8_t>(want | reconstruct_scratch::queued);
+            s.next_.push_back(static_cast<std::uint32_t>(q));
+        }
+}
+
+// Moves next_ into list_ (sorted: memory order) and clears the queued flags.
+inline void advance(reconstruct_scratch& s) {
+    std::sort(s.next_.begin(), s.next_.end());
+    s.list_.swap(s.next_);
+    s.next_.clear();
+    for (const std::uint32_t q : s.list_) s.state_[q] &= static_cast<std::uint8_t>(~reconstruct_scratch::queued);
+}
+
+}  // namespace detail
+
+// Reconstructs the pixels whose role is `rebuild`, in colour and, when not empty, variance.
+// role(mask[i]) is asked only for pixels with (mask[i] & interesting) != 0; the others are
+// sources. Every pixel not rebuilt is left bit-identical.
+template <class C, class V, class Role>
 reconstruct_report reconstruct(const image_view<C>& color, const image_view<V>& variance,
                                const std::uint8_t* mask, const reconstruct_options& o,
-                               reconstruct_scratch& s, std::uint8_t bits = 0xFF) {
+                               reconstruct_scratch& s, std::uint8_t interesting, Role&& role) {
     static_assert(!std::is_const_v<C> && !std::is_const_v<V>, "reconstruct writes its images");
     using ct = channel_traits<std::remove_cv_t<C>>;
     using vt = channel_traits<std::remove_cv_t<V>>;
@@ -110,66 +170,15 @@ reconstruct_report reconstruct(const image_view<C>& color, const image_view<V>& 
         rep.error = status{errc::channel_mismatch, "reconstruct handles at most 16 channels in all"};
         return rep;
     }
-
-    // Kernel symmetry classes (rebuilt only when the options change).
-    if (s.classes_width_ != o.kernel_width || s.classes_sigma_ != o.sigma) {
-        s.classes_.clear();
-        const int r = o.kernel_width / 2;
-        for (int a = 0; a <= r; ++a)
-            for (int b = a; b <= r; ++b) {
-                if (a == 0 && b == 0) continue;
-                reconstruct_scratch::kernel_class k{};
-                k.weight = std::exp(-(a * a + b * b) / (2.0 * o.sigma * o.sigma));
-                // Opposite pairs, in the order the summation tree expects.
-                auto add = [&k](int dx, int dy) {
-                    k.dx[k.count] = dx;
-                    k.dy[k.count] = dy;
-                    ++k.count;
-                };
-                if (a == 0) {  // the axis class (0, b)
-                    add(0, b), add(0, -b), add(b, 0), add(-b, 0);
-                } else if (a == b) {  // the diagonal class
-                    add(a, a), add(-a, -a), add(-a, a), add(a, -a);
-                } else {
-                    add(a, b), add(-a, -b), add(-a, b), add(a, -b);
-                    add(b, a), add(-b, -a), add(-b, a), add(b, -a);
-                }
-                s.classes_.push_back(k);
-            }
-        s.classes_width_ = o.kernel_width;
-        s.classes_sigma_ = o.sigma;
-    }
-
     const std::size_t npix = color.pixel_count();
     if (npix >= (std::size_t{1} << 32)) {
         rep.error = status{errc::size_overflow, "reconstruct handles fewer than 2^32 pixels"};
         return rep;
     }
-    s.state_.assign(npix, 0);
-    s.list_.clear();
-    {  // marked pixels are rare: test eight mask bytes at a time
-        const std::uint64_t wide = 0x0101010101010101ull * bits;
-        std::size_t i = 0;
-        for (; i + 8 <= npix; i += 8) {
-            std::uint64_t word;
-            std::memcpy(&word, mask + i, 8);
-            if (!(word & wide)) continue;
-            for (std::size_t k = i; k < i + 8; ++k)
-                if (mask[k] & bits) {
-                    s.state_[k] = 1;
-                    s.list_.push_back(static_cast<std::uint32_t>(k));
-                }
-        }
-        for (; i < npix; ++i)
-            if (mask[i] & bits) {
-                s.state_[i] = 1;
-                s.list_.push_back(static_cast<std::uint32_t>(i));
-            }
-    }
+    s.kernel_.set(o.kernel_width, o.sigma);
+    detail::mark_roles(mask, npix, interesting, role, s);
     rep.pixels = s.list_.size();
     if (s.list_.empty()) return rep;
-    s.staged_.assign(s.list_.size() * static_cast<std::size_t>(nch), 0.0);
-    s.ready_.assign(s.list_.size(), 0);
 
     auto load = [&](int x, int y, int c) -> double {
         return c < ncol ? ct::load(color(x, y, c)) : vt::load(variance(x, y, c - ncol));
@@ -178,54 +187,39 @@ reconstruct_report reconstruct(const image_view<C>& color, const image_view<V>& 
         if (c < ncol) color(x, y, c) = ct::store(v);
         else variance(x, y, c - ncol) = vt::store(v);
     };
-
-    // Weighted mean of the readable neighbours of list entry e into staged; false when none.
-    // readable(state) says which neighbour states may be read; an unreadable or outside
-    // neighbour contributes 0 to its place in the summation tree (and nothing to the weight).
-    constexpr int max_ch = 16;
-    // NC: the channel count when known at compile time (common counts), else 0 (runtime).
-    auto filter_n = [&](std::size_t e, auto readable, auto nc_const) -> bool {
+    // Sources and known marked pixels are read; queued flags do not change that.
+    auto readable = [&](int xx, int yy) {
+        const std::uint8_t st = s.state_[static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) +
+                                         static_cast<std::size_t>(xx)] &
+                                static_cast<std::uint8_t>(~reconstruct_scratch::queued);
+        return st == 0 || st == 2;
+    };
+    // Weighted mean of list entry e's readable neighbours into staged; false when none.
+    auto filter = [&](std::size_t e, auto nc_const) -> bool {
         constexpr int NC = decltype(nc_const)::value;
-        const int nchan = NC > 0 ? NC : nch;
         const std::size_t p = s.list_[e];
         const int x = static_cast<int>(p % static_cast<std::size_t>(w));
         const int y = static_cast<int>(p / static_cast<std::size_t>(w));
-        double wsum = 0.0;
-        double acc[max_ch] = {};
-        double v[8][max_ch];
-        for (const auto& k : s.classes_) {
-            int used = 0;
-            for (int j = 0; j < k.count; ++j) {
-                const int xx = x + k.dx[j], yy = y + k.dy[j];
-                const bool ok = xx >= 0 && yy >= 0 && xx < w && yy < h &&
-                                readable(s.state_[static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) +
-                                                  static_cast<std::size_t>(xx)]);
-                used += ok;
-                for (int c = 0; c < nchan; ++c) v[j][c] = ok ? load(xx, yy, c) : 0.0;
-            }
-            if (used == 0) continue;
-            wsum += k.weight * used;
-            if (k.count == 8) {
-                for (int c = 0; c < nchan; ++c)
-                    acc[c] += k.weight * (((v[0][c] + v[1][c]) + (v[2][c] + v[3][c])) +
-                                          ((v[4][c] + v[5][c]) + (v[6][c] + v[7][c])));
-            } else {
-                for (int c = 0; c < nchan; ++c) acc[c] += k.weight * ((v[0][c] + v[1][c]) + (v[2][c] + v[3][c]));
-            }
-        }
+        double acc[16] = {};
+        const double wsum = detail::kernel_sum<1, NC>(
+            s.kernel_, x, y, w, h, nch, readable,
+            [&](int xx, int yy, double* v) {
+                for (int c = 0; c < (NC > 0 ? NC : nch); ++c) v[c] = load(xx, yy, c);
+            },
+            acc);
         if (!(wsum > 0)) return false;
         double* out = &s.staged_[e * static_cast<std::size_t>(nch)];
-        for (int c = 0; c < nchan; ++c) out[c] = acc[c] / wsum;
+        for (int c = 0; c < nch; ++c) out[c] = acc[c] / wsum;
         return true;
     };
-    auto filter = [&](std::size_t e, auto readable) -> bool {
-        switch (nch) {
-            case 3: return filter_n(e, readable, std::integral_constant<int, 3>{});
-            case 4: return filter_n(e, readable, std::integral_constant<int, 4>{});
-            case 6: return filter_n(e, readable, std::integral_constant<int, 6>{});
-            case 7: return filter_n(e, readable, std::integral_constant<int, 7>{});
-            case 8: return filter_n(e, readable, std::integral_constant<int, 8>{});
-            default: return filter_n(e, readable, std::integral_constant<int, 0>{});
+    auto filter_any = [&](std::size_t e) -> bool {
+        switch (nch) {  // common channel counts at compile time
+            case 3: return filter(e, std::integral_constant<int, 3>{});
+            case 4: return filter(e, std::integral_constant<int, 4>{});
+            case 6: return filter(e, std::integral_constant<int, 6>{});
+            case 7: return filter(e, std::integral_constant<int, 7>{});
+            case 8: return filter(e, std::integral_constant<int, 8>{});
+            default: return filter(e, std::integral_constant<int, 0>{});
         }
     };
     auto commit = [&](std::size_t e) -> double {  // write staged values, return rel. change
@@ -242,73 +236,79 @@ reconstruct_report reconstruct(const image_view<C>& color, const image_view<V>& 
         }
         return change;
     };
+    const int r = o.kernel_width / 2;
 
-    // Phase 1: rounds that read only what was known when the round began.
+    // Phase 1: the first round tries every marked pixel; later ones the frontier.
     std::size_t pending = s.list_.size();
-    while (pending > 0) {
-        std::size_t done = 0;
-        for (std::size_t e = 0; e < s.list_.size(); ++e) {
-            if (s.state_[s.list_[e]] != 1) continue;
-            s.ready_[e] = filter(e, [](std::uint8_t st) { return st == 0 || st == 2; }) ? 1 : 0;
-            done += s.ready_[e];
-        }
-        if (done == 0) break;  // nothing readable anywhere: no valid pixel at all
-        ++rep.phase1_rounds;
+    while (!s.list_.empty()) {
+        s.staged_.resize(s.list_.size() * static_cast<std::size_t>(nch));
+        std::size_t kept = 0;  // entries that found a neighbour move to the front
         for (std::size_t e = 0; e < s.list_.size(); ++e)
-            if (s.ready_[e]) {
-                (void)commit(e);
-                s.state_[s.list_[e]] = 2;
-                s.ready_[e] = 0;
+            if (filter_any(e)) {
+                if (kept != e) {
+                    std::memmove(&s.staged_[kept * static_cast<std::size_t>(nch)],
+                                 &s.staged_[e * static_cast<std::size_t>(nch)], sizeof(double) * static_cast<std::size_t>(nch));
+                    s.list_[kept] = s.list_[e];
+                }
+                ++kept;
             }
-        pending -= done;
+        if (kept == 0) break;
+        s.list_.resize(kept);
+        ++rep.phase1_rounds;
+        for (std::size_t e = 0; e < kept; ++e) {
+            (void)commit(e);
+            s.state_[s.list_[e]] = 2;
+        }
+        pending -= kept;
+        for (const std::uint32_t p : s.list_) detail::queue_neighbours(p, w, h, r, 1, s);
+        detail::advance(s);
     }
     if (pending > 0) {
         rep.unreachable = pending;
-        rep.error = status{errc::no_valid_pixels, "no valid pixel to reconstruct from"};
-        // Nothing may become or stay NaN: non-finite values of unreachable pixels become 0.
-        for (std::size_t e = 0; e < s.list_.size(); ++e) {
-            const std::size_t p = s.list_[e];
-            if (s.state_[p] != 1) continue;
-            const int x = static_cast<int>(p % static_cast<std::size_t>(w));
-            const int y = static_cast<int>(p / static_cast<std::size_t>(w));
-            for (int c = 0; c < nch; ++c)
-                if (!std::isfinite(load(x, y, c))) store(x, y, c, 0.0);
-        }
-        return rep;
+        rep.error = status{errc::no_valid_pixels, "pixels with no usable source anywhere were left as they were"};
     }
 
-    // Phase 2: only entries with a marked neighbour can still change.
-    std::vector<std::uint32_t>& active = s.list_;  // reorder in place: active entries first
-    std::size_t nactive = 0;
-    {
-        // Staged values need no reordering: they are recomputed before every commit.
-        const int r = o.kernel_width / 2;
-        for (std::size_t e = 0; e < active.size(); ++e) {
-            const std::size_t p = active[e];
+    // Phase 2: first the known marked pixels that have known marked neighbours.
+    s.next_.clear();
+    for (std::size_t p = 0; p < npix; ++p)  // state 2 pixels only: a byte scan
+        if (s.state_[p] == 2) {
             const int x = static_cast<int>(p % static_cast<std::size_t>(w));
             const int y = static_cast<int>(p / static_cast<std::size_t>(w));
             bool has = false;
-            for (int dy = -r; dy <= r && !has; ++dy)
-                for (int dx = -r; dx <= r && !has; ++dx) {
-                    const int xx = x + dx, yy = y + dy;
-                    if ((dx || dy) && xx >= 0 && yy >= 0 && xx < w && yy < h &&
-                        s.state_[static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) +
-                                 static_cast<std::size_t>(xx)] != 0)
-                        has = true;
-                }
-            if (has) std::swap(active[nactive++], active[e]);
+            for (int yy = std::max(0, y - r); yy <= std::min(h - 1, y + r) && !has; ++yy)
+                for (int xx = std::max(0, x - r); xx <= std::min(w - 1, x + r) && !has; ++xx)
+                    has = (xx != x || yy != y) &&
+                          (s.state_[static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(xx)] &
+                           0x7f) == 2;
+            if (has) s.next_.push_back(static_cast<std::uint32_t>(p));
         }
-        std::sort(active.begin(), active.begin() + static_cast<std::ptrdiff_t>(nactive));
-    }
-    for (int it = 0; it < o.max_iterations && nactive > 0; ++it) {
-        for (std::size_t e = 0; e < nactive; ++e) (void)filter(e, [](std::uint8_t) { return true; });
+    s.list_.swap(s.next_);
+    s.next_.clear();
+    for (int it = 0; it < o.max_iterations && !s.list_.empty(); ++it) {
+        s.staged_.resize(s.list_.size() * static_cast<std::size_t>(nch));
+        for (std::size_t e = 0; e < s.list_.size(); ++e) (void)filter_any(e);
         double change = 0.0;
-        for (std::size_t e = 0; e < nactive; ++e) change = std::max(change, commit(e));
+        for (std::size_t e = 0; e < s.list_.size(); ++e) {
+            const double c = commit(e);
+            change = std::max(change, c);
+            if (c > o.tolerance) detail::queue_neighbours(s.list_[e], w, h, r, 2, s);
+        }
         rep.phase2_iterations = it + 1;
         rep.final_change = change;
-        if (change <= o.tolerance) break;
+        detail::advance(s);
     }
+    for (const std::uint32_t q : s.list_) s.state_[q] &= static_cast<std::uint8_t>(~reconstruct_scratch::queued);
     return rep;
+}
+
+// Reconstructs the pixels i (row-major, i = y * width + x) with (mask[i] & bits) != 0; every
+// other pixel is a source.
+template <class C, class V>
+reconstruct_report reconstruct(const image_view<C>& color, const image_view<V>& variance,
+                               const std::uint8_t* mask, const reconstruct_options& o,
+                               reconstruct_scratch& s, std::uint8_t bits = 0xFF) {
+    return reconstruct(color, variance, mask, o, s, bits,
+                       [](std::uint8_t) { return pixel_role::rebuild; });
 }
 
 }  // namespace firefly

@@ -1,0 +1,96 @@
+// firefly: rebuilding a pixel that is bad in one half only from the other half.
+//
+// A firefly (or a NaN) in half A at pixel p leaves half B's value at p untouched: B(p) is an
+// unbiased estimate of the pixel with a known variance vB. The spatial estimate S, the
+// Gaussian mean of A's neighbours, has a variance of its own (sum w_i^2 vA_i / W^2) and a
+// bias wherever the image has detail. The bias can be judged without a reference: the same
+// weights over B's neighbours give S_B, and B(p) - S_B has expectation -bias and variance
+// vB + var(S_B), both halves being independent images of one scene. So
+//
+//   MSE(S) ~ var(S) + max(0, (S_B - B(p))^2 - vB - var(S_B))     (channel sums)
+//
+// The frame's final pixel is (A' + B) / 2. With A' = a S + (1 - a) B(p) its expected error is
+// (a^2 MSE(S) + (2 - a)^2 vB) / 4, least at a = 2 vB / (MSE(S) + vB), clamped to [0, 1]:
+// the spatial estimate is used where it lowers the expected error of the frame, and in
+// detail, at edges and inside a failed bucket (no readable neighbour) A' is B(p) itself.
+// The stored variance of A' is its own: a^2 MSE(S) + (1 - a)^2 vB (per channel). Note that
+// A' and B are then correlated, so (vA + vB) / 4 understates the final pixel's variance
+// there; the masks mark these pixels (mask_bits::other_half).
+//
+// Variances here are variances of the pixel mean: the renderer's variance times the frame's
+// calibration factor (highlight.hpp), and back again when stored.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <type_traits>
+
+#include "image_view.hpp"
+#include "kernel.hpp"
+
+namespace firefly {
+
+// One half's colour and variance, read-only, for the estimate.
+template <class C, class V>
+struct half_views {
+    image_view<const C> color;
+    image_view<const V> variance;
+};
+
+namespace detail {
+
+// The estimate of pixel (x, y) of half `own` from the other half. readable(xx, yy): the
+// neighbour is a clean pixel in both halves. blend = false: the other half's value alone.
+// out: colour channels, then variance channels. Returns the spatial weight a.
+template <class C, class V, class Readable>
+double cross_half_estimate(const half_views<C, V>& own, const half_views<C, V>& other, const gaussian_kernel& kernel,
+                           double calibration, bool blend, int x, int y, Readable&& readable, double* out) {
+    const int nc = own.color.channels(), nv = own.variance.channels();
+    const int nd = nc < 3 ? nc : 3;  // colour channels that decide (a 4th is carried along)
+    double xo[4], vo[4];
+    for (int c = 0; c < nc; ++c) xo[c] = other.color.load(x, y, c);
+    for (int c = 0; c < nv; ++c) vo[c] = std::max(other.variance.load(x, y, c), 0.0);
+    double a = 0.0;
+    double s[8] = {}, vs[8] = {};  // [0, n): own half, [n, 2n): other half
+    if (blend) {
+        const int w = own.color.width(), h = own.color.height();
+        const double wsum = kernel_sum<1, 0>(
+            kernel, x, y, w, h, 2 * nc, readable,
+            [&](int xx, int yy, double* v) {
+                for (int c = 0; c < nc; ++c) v[c] = own.color.load(xx, yy, c), v[nc + c] = other.color.load(xx, yy, c);
+            },
+            s);
+        (void)kernel_sum<2, 0>(
+            kernel, x, y, w, h, 2 * nv, readable,
+            [&](int xx, int yy, double* v) {
+                for (int c = 0; c < nv; ++c)
+                    v[c] = std::max(own.variance.load(xx, yy, c), 0.0),
+                    v[nv + c] = std::max(other.variance.load(xx, yy, c), 0.0);
+            },
+            vs);
+        if (wsum > 0) {
+            for (int c = 0; c < 2 * nc; ++c) s[c] /= wsum;
+            for (int c = 0; c < 2 * nv; ++c) vs[c] /= wsum * wsum;
+            double v_other = 0, var_s = 0, miss = 0;  // channel sums, variances of the mean
+            for (int c = 0; c < nd; ++c) {
+                const int j = nv == 1 ? 0 : c;
+                const double d = s[nc + c] - xo[c];
+                v_other += calibration * vo[j];
+                var_s += calibration * vs[j];
+                miss += d * d - calibration * (vo[j] + vs[nv + j]);
+            }
+            const double mse_s = var_s + std::max(miss, 0.0);
+            const double den = mse_s + v_other;
+            a = den > 0 && std::isfinite(den) ? std::min(1.0, 2.0 * v_other / den) : 0.0;
+            if (!(a >= 0)) a = 0.0;
+            const double bias2 = std::max(miss, 0.0) / (nd * calibration);  // per channel, renderer units
+            for (int c = 0; c < nv; ++c) vs[c] += bias2;
+        }
+    }
+    for (int c = 0; c < nc; ++c) out[c] = a > 0 ? a * s[c] + (1 - a) * xo[c] : xo[c];
+    for (int c = 0; c < nv; ++c) out[nc + c] = a > 0 ? a * a * vs[c] + (1 - a) * (1 - a) * vo[c] : vo[c];
+    return a;
+}
+
+}  // namespace detail
+}  // namespace firefly

@@ -1,0 +1,97 @@
+// firefly: the Gaussian reconstruction kernel and its flip-exact weighted sums.
+//
+// The kernel's offsets fall into classes that the 8 flips/transposes of the square permute
+// among themselves with equal weights. Each class is listed as opposite pairs (m, -m) and
+// summed as the tree ((P1 + P2) + (P3 + P4)) of pair sums P = v(m) + v(-m): every flip or
+// transpose only swaps operands of some + in that tree (the 180-degree turn fixes each pair;
+// the rest of the group permutes the pairs as the Klein four-group, which keeps the pairing
+// {P1, P2}, {P3, P4}), and + is commutative, so a flipped or transposed input gives a
+// bit-identical (flipped) output with no sorting.
+#pragma once
+
+#include <cmath>
+#include <vector>
+
+namespace firefly::detail {
+
+struct kernel_class {
+    double weight;
+    int count;  // 4 or 8 offsets
+    int dx[8], dy[8];
+};
+
+// The classes of a width x width Gaussian kernel (width odd), centre excluded.
+class gaussian_kernel {
+public:
+    // Rebuilds the classes only when width or sigma change.
+    void set(int width, double sigma) {
+        if (width == width_ && sigma == sigma_) return;
+        classes_.clear();
+        const int r = width / 2;
+        for (int a = 0; a <= r; ++a)
+            for (int b = a; b <= r; ++b) {
+                if (a == 0 && b == 0) continue;
+                kernel_class k{};
+                k.weight = std::exp(-(a * a + b * b) / (2.0 * sigma * sigma));
+                auto add = [&k](int dx, int dy) {  // opposite pairs, in the tree's order
+                    k.dx[k.count] = dx;
+                    k.dy[k.count] = dy;
+                    ++k.count;
+                };
+                if (a == 0) {
+                    add(0, b), add(0, -b), add(b, 0), add(-b, 0);
+                } else if (a == b) {
+                    add(a, a), add(-a, -a), add(-a, a), add(a, -a);
+                } else {
+                    add(a, b), add(-a, -b), add(-a, b), add(a, -b);
+                    add(b, a), add(-b, -a), add(-b, a), add(b, -a);
+                }
+                classes_.push_back(k);
+            }
+        width_ = width;
+        sigma_ = sigma;
+    }
+    const std::vector<kernel_class>& classes() const noexcept { return classes_; }
+    int radius() const noexcept { return width_ / 2; }
+
+private:
+    std::vector<kernel_class> classes_;
+    int width_ = 0;
+    double sigma_ = 0;
+};
+
+// Weighted sums over the neighbours of (x, y) in a w x h image that `readable(xx, yy)`
+// accepts: acc[c] += weight^Power * v(c) for c < NC channels, where load(xx, yy, v) fills
+// v[0..NC). Returns the sum of weight^Power over the neighbours read (0: none). Unreadable
+// and outside neighbours contribute 0 to their place in the tree, so the sum is flip-exact.
+template <int Power, int NC, class Readable, class Load>
+double kernel_sum(const gaussian_kernel& kernel, int x, int y, int w, int h, int nchan, Readable&& readable,
+                  Load&& load, double* acc) {
+    constexpr int cap = NC > 0 ? NC : 32;
+    const int n = NC > 0 ? NC : nchan;
+    double wsum = 0.0;
+    double v[8][cap];
+    for (const kernel_class& k : kernel.classes()) {
+        int used = 0;
+        for (int j = 0; j < k.count; ++j) {
+            const int xx = x + k.dx[j], yy = y + k.dy[j];
+            const bool ok = xx >= 0 && yy >= 0 && xx < w && yy < h && readable(xx, yy);
+            used += ok;
+            if (ok) load(xx, yy, v[j]);
+            else
+                for (int c = 0; c < n; ++c) v[j][c] = 0.0;
+        }
+        if (used == 0) continue;
+        const double wk = Power == 1 ? k.weight : k.weight * k.weight;
+        wsum += wk * used;
+        if (k.count == 8) {
+            for (int c = 0; c < n; ++c)
+                acc[c] += wk * (((v[0][c] + v[1][c]) + (v[2][c] + v[3][c])) + ((v[4][c] + v[5][c]) + (v[6][c] + v[7][c])));
+        } else {
+            for (int c = 0; c < n; ++c) acc[c] += wk * ((v[0][c] + v[1][c]) + (v[2][c] + v[3][c]));
+        }
+    }
+    return wsum;
+}
+
+}  // namespace firefly::detail
