@@ -104,8 +104,10 @@ struct local_test_scratch {
     std::vector<double> level[2];  // mean colour; NaN where the pixel does not count
     std::vector<float> log_r[2];   // log relative variance; NaN where unusable
     std::vector<float> pool;
+    std::vector<double> thresholds;  // t_df(q) by df grid step (see detail::threshold_cache)
+    double thresholds_q = 0;
     std::size_t bytes() const noexcept {
-        return (level[0].capacity() + level[1].capacity()) * sizeof(double) +
+        return (level[0].capacity() + level[1].capacity() + thresholds.capacity()) * sizeof(double) +
                (log_r[0].capacity() + log_r[1].capacity() + pool.capacity()) * sizeof(float);
     }
 };
@@ -127,48 +129,61 @@ namespace detail {
 // rounding, so a smaller relative sd is not information (and m stays finite).
 inline constexpr double min_relative_variance = 1e-14;
 
-// Level (mean colour) and log relative variance of every pixel of one half.
+// Level (mean colour) and log relative variance of one pixel; false when it does not count.
+template <class T>
+inline bool local_pixel(const T* pc, std::ptrdiff_t cs, const T* pv, std::ptrdiff_t vs, int nc, bool one_var,
+                        double scale, double& level, float& log_r) noexcept {
+    using traits = channel_traits<std::remove_cv_t<T>>;
+    double sum = 0, sd = 0, fin = 0;
+    bool black = true;
+    for (int c = 0; c < nc; ++c) {
+        const double v = traits::load(pc[c * cs]);
+        const double var = traits::load(pv[one_var ? 0 : c * vs]);
+        fin += (v - v) + (var - var);  // NaN for any NaN or Inf
+        black &= v == 0.0;
+        sum += v;
+        sd += std::sqrt(std::max(var, 0.0) * scale);
+    }
+    level = sum / nc;  // finite sums of floats up to FLT_MAX stay finite in double
+    if (!(fin == 0.0) || black) return false;
+    if (!(level > 0) || !std::isfinite(level)) {
+        log_r = std::numeric_limits<float>::quiet_NaN();
+        return true;  // counts, but has no relative variance: neither tested nor pooled
+    }
+    const double rel = (sd / nc) / level;  // a ratio first: no overflow near FLT_MAX
+    const double r = std::max(rel * rel, min_relative_variance);
+    log_r = std::isfinite(r) ? static_cast<float>(std::log(r)) : std::numeric_limits<float>::quiet_NaN();
+    return true;
+}
+
+// Level and log relative variance of every pixel of one half (NaN where unusable).
 template <class T>
 void local_levels(const local_half<T>& h, double scale, std::vector<double>& level, std::vector<float>& log_r) {
     const int w = h.color.width(), ht = h.color.height();
     const int nc = colour_channels(h.color.channels());
-    const int nv = h.variance.channels();
-    const std::size_t n = h.color.pixel_count();
-    level.resize(n);
-    log_r.resize(n);
-    const double nan = std::numeric_limits<double>::quiet_NaN();
+    const bool one_var = h.variance.channels() == 1;
+    level.resize(h.color.pixel_count());
+    log_r.resize(h.color.pixel_count());
+    const strided<const T> col(h.color), var(h.variance);
+    const strided<const T> al(h.alpha);
+    using traits = channel_traits<std::remove_cv_t<T>>;
+    const auto valid = static_cast<std::uint8_t>(pixel_class::valid);
     for (int y = 0; y < ht; ++y)
         for (int x = 0; x < w; ++x) {
             const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
-            double sum = 0, sd = 0;
-            bool finite = true, black = true;
-            for (int c = 0; c < nc; ++c) {
-                const double v = h.color.load(x, y, c);
-                const double var = h.variance.load(x, y, nv == 1 ? 0 : c);
-                finite &= std::isfinite(v) && std::isfinite(var);
-                black &= v == 0.0;
-                sum += v;
-                sd += std::sqrt(std::max(var, 0.0) * scale);  // NaN var: caught by finite
-            }
-            bool counts;
+            const T* pc = col.p + y * col.y + x * col.x;
+            const T* pv = var.p + y * var.y + x * var.x;
+            bool counts = local_pixel(pc, col.c, pv, var.c, nc, one_var, scale, level[i], log_r[i]);
             if (h.label) {
-                counts = (h.label[i] & pixel_class_bits) == static_cast<std::uint8_t>(pixel_class::valid);
-                counts &= finite;  // labels computed with another view must not let NaN in
-            } else {
-                const double a = h.alpha.empty() ? 1.0 : h.alpha.load(x, y, 0);
-                counts = finite && !black && std::isfinite(a) && a > 0;
+                counts &= (h.label[i] & pixel_class_bits) == valid;
+            } else if (!h.alpha.empty()) {
+                const double a = traits::load(al.p[y * al.y + x * al.x]);
+                counts &= a > 0 && std::isfinite(a);
             }
-            const double mean = sum / nc;  // finite sums of floats up to FLT_MAX stay finite
-            if (!counts || !(mean > 0) || !std::isfinite(mean)) {
-                level[i] = counts ? mean : nan;
+            if (!counts) {
+                level[i] = std::numeric_limits<double>::quiet_NaN();
                 log_r[i] = std::numeric_limits<float>::quiet_NaN();
-                continue;
             }
-            level[i] = mean;
-            // r = (sd / nc)^2 / mean^2, formed as a ratio first (no overflow near FLT_MAX)
-            const double rel = (sd / nc) / mean;
-            const double r = std::max(rel * rel, min_relative_variance);
-            log_r[i] = std::isfinite(r) ? static_cast<float>(std::log(r)) : std::numeric_limits<float>::quiet_NaN();
         }
 }
 
@@ -225,6 +240,22 @@ inline double pair_statistic(double hi, double lo, double r) noexcept {
     return std::sqrt(0.5 / r) * s;
 }
 
+// t_df(q) with df rounded down to a grid of 64 steps per octave (from 1 to 2^34): a lower df
+// gives a higher threshold, so the rounding only makes the test a little stricter (df at most
+// 1.1% low), and the Newton iterations run once per grid step and sequence of frames.
+inline double t_threshold(local_test_scratch& s, double q, double df) {
+    constexpr int steps = 64, octaves = 34;
+    if (s.thresholds_q != q || s.thresholds.empty()) {
+        s.thresholds.assign(steps * octaves + 1, 0.0);
+        s.thresholds_q = q;
+    }
+    const double g = std::floor(std::log2(std::max(df, 1.0)) * steps);
+    const int k = static_cast<int>(std::min(g, static_cast<double>(steps * octaves)));
+    double& t = s.thresholds[static_cast<std::size_t>(k)];
+    if (t == 0.0) t = student_t_upper_quantile(q, std::exp2(static_cast<double>(k) / steps));
+    return t;
+}
+
 }  // namespace detail
 
 // Runs the local test on both halves. Views must share size, channel counts as for
@@ -258,8 +289,11 @@ status local_test(const local_half<T>& a, const local_half<T>& b, const local_te
             const int hi = la > lb ? 0 : 1;  // the half that could hold a firefly
             const double l_hi = hi == 0 ? la : lb, l_lo = hi == 0 ? lb : la;
             const double r_other = std::exp(static_cast<double>(hi == 0 ? rb : ra));
-            // Screen: r~ >= r_other and t_{2m}(q) >= z_q bound T from above.
-            if (!(detail::pair_statistic(l_hi, l_lo, r_other) > zq)) continue;
+            // Screen: r~ >= r_other bounds T from above and df from above (so the threshold
+            // from below): most pixels are decided without the neighbourhood.
+            const double t_pair = detail::pair_statistic(l_hi, l_lo, r_other);
+            if (!(t_pair > zq)) continue;
+            if (!(t_pair > detail::t_threshold(scratch, options.false_alarm, std::min(2.0 / r_other, 1e10)))) continue;
             ++result.screened;
             const detail::pooled_estimate pooled = detail::pooled_relative_variance(
                 scratch.log_r, w, h, x, y, options.radius, options.min_neighbours, scratch.pool);
@@ -269,7 +303,7 @@ status local_test(const local_half<T>& a, const local_half<T>& b, const local_te
             if (!(t > zq)) continue;
             // t with 2m degrees of freedom for the gamma law, widened by the uncertainty of r~
             const double df = std::min(std::max(1.0 / (0.5 * r + 1.0 / pooled.nu), 1.0), 1e10);
-            const double threshold = student_t_upper_quantile(options.false_alarm, df);
+            const double threshold = detail::t_threshold(scratch, options.false_alarm, df);
             if (!(t > threshold)) continue;
             const double score = std::min(t / threshold, static_cast<double>(std::numeric_limits<float>::max()));
             result.half[hi].index.push_back(static_cast<std::uint32_t>(i));
