@@ -2,10 +2,13 @@
 #include <firefly/sim/metrics.hpp>
 #include <firefly/sim/scene.hpp>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "../examples/pfm.hpp"
@@ -46,27 +49,30 @@ TEST_CASE("the simulator is deterministic for a seed and differs across seeds", 
 TEST_CASE("only the effects a scene lists are simulated", "[sim]") {
     sim::scene s = sim::named_scene("flat", 128, 96, 1);
     sim::frame f = sim::simulate(s);
-    std::size_t ff = 0, hl = 0, zero = 0;
+    std::size_t hl = 0, zero = 0;
     for (std::size_t i = 0; i < f.pixels(); ++i) {
-        ff += f.firefly_energy[0][i] > 0 || f.firefly_energy[1][i] > 0;
         hl += f.highlight[i];
         zero += f.color[0][i * 3] == 0.0f;
     }
-    CHECK(ff == 0);
+    // Arrays of effects not in use are not allocated.
+    CHECK(f.firefly_energy[0].empty());
+    CHECK(f.nonfinite[1].empty());
+    CHECK(f.touched.empty());
     CHECK(hl == 0);
     CHECK(zero == 0);
     CHECK(f.alpha.empty());
     s.effects = sim::fireflies;
     f = sim::simulate(s);
-    ff = 0;
-    for (std::size_t i = 0; i < f.pixels(); ++i) ff += f.firefly_energy[0][i] > 0;
+    std::size_t ff = 0;
+    for (std::size_t i = 0; i < f.pixels(); ++i) ff += f.firefly(0, i) > 0;
     // ~0.5% of pixels per half by default
     CHECK(ff > f.pixels() / 400);
     CHECK(ff < f.pixels() / 100);
+    CHECK(f.nonfinite[0].empty());
     s.firefly_probability = 1e-3;  // per sample: 1 - (1 - 1e-3)^64 = 6.2% of pixels per half
     f = sim::simulate(s);
     ff = 0;
-    for (std::size_t i = 0; i < f.pixels(); ++i) ff += f.firefly_energy[0][i] > 0;
+    for (std::size_t i = 0; i < f.pixels(); ++i) ff += f.firefly(0, i) > 0;
     CHECK(static_cast<double>(ff) / static_cast<double>(f.pixels()) == Approx(0.062).epsilon(0.1));
     s.firefly_probability = 0;
     s.effects = sim::black_background | sim::alpha_coverage;
@@ -93,8 +99,8 @@ TEST_CASE("simulated pixel statistics match a renderer's", "[sim]") {
     CHECK(mean / static_cast<double>(f.pixels() * 3) == Approx(s.base * (1 + 0.85 + 0.7) / 3).epsilon(0.01));
 }
 
-TEST_CASE("default detector on every named scene: ground-truth accuracy", "[sim][accuracy]") {
-    for (const std::string& name : sim::scene_names()) {
+TEST_CASE("default detector on the classic named scenes: ground-truth accuracy", "[sim][accuracy]") {
+    for (const std::string& name : sim::classic_scene_names()) {
         const sim::frame f = sim::simulate(sim::named_scene(name, 320, 240, 21));
         frame_report r;
         const sim::accuracy a = run_default(f, &r);
@@ -151,4 +157,383 @@ TEST_CASE("the full real render in ../shared/data, when present", "[real]") {
     const std::string dir = std::string(FIREFLY_SHARED_DATA) + "/cycles-caustics";
     if (!clean_real(dir, "real"))
         WARN("skipped: " << dir << " is absent (it ships beside the repository, not in it)");
+}
+
+// ---------------------------------------------------------------------------------------
+// Independence, K buffers, the accuracy scenes, the per-sample laws, the metrics.
+
+namespace {
+constexpr std::uint32_t all_effects =
+    sim::gradient | sim::fine_detail | sim::varying_noise | sim::fireflies | sim::highlights |
+    sim::wide_highlight | sim::black_background | sim::alpha_coverage | sim::nonfinite | sim::negative |
+    sim::log_gradient | sim::caustics | sim::failed_bucket | sim::bright_region;
+
+bool same_bits(const float* a, const float* b, std::size_t n) { return std::memcmp(a, b, n * sizeof(float)) == 0; }
+
+// Pixels outside E's footprint are bit-identical with E on and off, in every buffer.
+void check_independence(const sim::scene& base, sim::effect e, int k) {
+    sim::scene on = base, off = base;
+    on.effects |= e;
+    off.effects &= ~static_cast<std::uint32_t>(e);
+    const sim::buffers a = sim::simulate_buffers(on, k), b = sim::simulate_buffers(off, k);
+    const std::size_t np = a.pixels();
+    std::size_t footprint = 0, differ = 0, outside_differ = 0;
+    const bool expected_everywhere = e == sim::fireflies || e == sim::caustics;  // documented
+    for (std::size_t i = 0; i < np; ++i) {
+        REQUIRE(!b.touched.empty());
+        CHECK((b.touched[i] & e) == 0);
+        bool same = a.highlight[i] == b.highlight[i];
+        if (!a.alpha.empty() && !b.alpha.empty()) same = same && same_bits(&a.alpha[i], &b.alpha[i], 1);
+        if (!expected_everywhere) same = same && same_bits(&a.expected[i * 3], &b.expected[i * 3], 3);
+        for (int j = 0; j < k; ++j) {
+            same = same && same_bits(&a.color[j][i * 3], &b.color[j][i * 3], 3) &&
+                   same_bits(&a.variance[j][i * 3], &b.variance[j][i * 3], 3) &&
+                   a.firefly(j, i) == b.firefly(j, i) && a.bad(j, i) == b.bad(j, i);
+        }
+        const bool in = (a.touched[i] & e) != 0;
+        footprint += in;
+        differ += !same;
+        outside_differ += !in && !same;
+    }
+    INFO("effect " << e << ", " << k << " buffers: footprint " << footprint << ", differ " << differ);
+    CHECK(footprint > 0);
+    CHECK(differ > 0);  // the effect does something
+    CHECK(outside_differ == 0);
+    const bool global = e == sim::gradient || e == sim::log_gradient || e == sim::varying_noise;
+    if (!global) CHECK(footprint < np / 2);
+}
+
+double luminance(const std::vector<float>& rgb, std::size_t i) {
+    return (rgb[i * 3] + rgb[i * 3 + 1] + rgb[i * 3 + 2]) / 3.0;
+}
+
+double hit_share(const sim::frame& f, int half) {
+    std::size_t n = 0;
+    for (std::size_t i = 0; i < f.pixels(); ++i) n += f.firefly(half, i) > 0;
+    return static_cast<double>(n) / static_cast<double>(f.pixels());
+}
+}  // namespace
+
+TEST_CASE("every effect leaves the pixels outside its footprint bit-identical", "[sim][independence]") {
+    sim::scene s;
+    s.width = 96;
+    s.height = 80;
+    s.spp = 16;
+    s.seed = 7;
+    s.firefly_pixel_rate = 0.05;
+    s.nonfinite_pixel_rate = 0.01;
+    s.highlight_count = 12;
+    s.region_radius = 0.05;
+    for (const sim::distribution d : {sim::distribution::normal, sim::distribution::gamma}) {
+        s.samples = d;
+        s.noise = d == sim::distribution::normal ? 0.6 : 0.5;
+        s.highlight_noise = d == sim::distribution::normal ? 2.5 : 0.5;
+        for (const bool relative : {false, true}) {
+            s.firefly_relative = relative;
+            s.firefly_energy = relative ? 5.0 : 400.0;
+            for (int bit = 0; bit < 14; ++bit) {
+                const sim::effect e = static_cast<sim::effect>(1u << bit);
+                // Coverage is one effect seen twice: either of the pair masks the background.
+                const std::uint32_t pair = e == sim::black_background ? sim::alpha_coverage
+                                           : e == sim::alpha_coverage ? sim::black_background
+                                                                      : 0u;
+                s.effects = all_effects & ~static_cast<std::uint32_t>(e) & ~pair;
+                check_independence(s, e, 2);
+                if (!relative) check_independence(s, e, 5);
+            }
+        }
+    }
+}
+
+TEST_CASE("every named scene is deterministic, K = 2 buffers are the halves", "[sim]") {
+    for (const std::string& name : sim::scene_names()) {
+        INFO(name);
+        sim::scene s = sim::named_scene(name, 64, 48, 5);
+        s.spp = std::min(s.spp, 64);
+        const sim::frame a = sim::simulate(s), b = sim::simulate(s);
+        const sim::buffers k2 = sim::simulate_buffers(s, 2);
+        for (int h = 0; h < 2; ++h) {
+            CHECK(same_bits(a.color[h].data(), b.color[h].data(), a.color[h].size()));
+            CHECK(same_bits(a.variance[h].data(), b.variance[h].data(), a.variance[h].size()));
+            CHECK(same_bits(a.color[h].data(), k2.color[h].data(), a.color[h].size()));
+            CHECK(same_bits(a.variance[h].data(), k2.variance[h].data(), a.variance[h].size()));
+            CHECK(a.firefly_energy[h] == k2.firefly_energy[h]);
+            CHECK(a.nonfinite[h] == k2.nonfinite[h]);
+        }
+        CHECK(a.expected == k2.expected);
+        CHECK(a.highlight == k2.highlight);
+        CHECK(a.touched == k2.touched);
+        CHECK(k2.spp[0] == s.spp);
+        CHECK(k2.spp[1] == s.spp);
+    }
+}
+
+TEST_CASE("K buffers split the samples and average to the same expectation", "[sim][buffers]") {
+    sim::scene s = sim::named_scene("flat", 160, 120, 3);
+    s.spp = 30;  // 60 samples: 4 buffers of 15
+    s.effects = sim::gradient;
+    const sim::buffers f = sim::simulate_buffers(s, 4);
+    REQUIRE(f.count() == 4);
+    for (int b = 0; b < 4; ++b) CHECK(f.spp[b] == 15);
+    CHECK(sim::simulate_buffers(s, 7).spp == std::vector<int>{9, 9, 9, 9, 8, 8, 8});
+    const std::size_t np = f.pixels();
+    for (int b = 0; b < 4; ++b) {
+        double sum = 0, ref = 0;
+        for (std::size_t i = 0; i < np * 3; ++i) {
+            sum += f.color[b][i];
+            ref += f.expected[i];
+        }
+        CHECK(sum / ref == Approx(1.0).epsilon(0.01));
+    }
+    // Independent: (X_b - X_c)^2 averages var_b + var_c; and each buffer differs from the others.
+    for (int b = 0; b < 4; ++b)
+        for (int c = b + 1; c < 4; ++c) {
+            double d2 = 0, v = 0;
+            for (std::size_t i = 0; i < np * 3; ++i) {
+                const double d = f.color[b][i] - f.color[c][i];
+                d2 += d * d;
+                v += f.variance[b][i] + f.variance[c][i];
+            }
+            CHECK(d2 / v == Approx(1.0).epsilon(0.05));
+        }
+    // The combined image has the variance of all samples: a quarter of one buffer's.
+    const std::vector<float> all = sim::combine(f, f.color);
+    double e_all = 0, e_one = 0;
+    for (std::size_t i = 0; i < np * 3; ++i) {
+        e_all += (all[i] - f.expected[i]) * (all[i] - f.expected[i]);
+        e_one += (f.color[0][i] - f.expected[i]) * (f.color[0][i] - f.expected[i]);
+    }
+    CHECK(e_one / e_all == Approx(4.0).epsilon(0.06));
+}
+
+TEST_CASE("dense scenes hit the share of pixels they name", "[sim][scenes]") {
+    for (const auto& [name, rate] : {std::pair<const char*, double>{"dense10", 0.10}, {"dense30", 0.30}}) {
+        const sim::frame f = sim::simulate(sim::named_scene(name, 200, 150, 2));
+        INFO(name);
+        CHECK(hit_share(f, 0) == Approx(rate).epsilon(0.05));
+        CHECK(hit_share(f, 1) == Approx(rate).epsilon(0.05));
+    }
+}
+
+TEST_CASE("caustics: ~3% of pixels per half, clustered in a few caustics", "[sim][scenes]") {
+    const sim::frame f = sim::simulate(sim::named_scene("caustics", 400, 300, 4));
+    for (int h = 0; h < 2; ++h) {
+        CHECK(hit_share(f, h) > 0.02);
+        CHECK(hit_share(f, h) < 0.045);
+    }
+    std::size_t in = 0, in_hit = 0, out = 0, out_hit = 0;
+    for (std::size_t i = 0; i < f.pixels(); ++i) {
+        const bool hit = f.firefly(0, i) > 0;
+        if (f.touched[i] & sim::caustics) {
+            ++in;
+            in_hit += hit;
+        } else {
+            ++out;
+            out_hit += hit;
+        }
+    }
+    CHECK(in > f.pixels() / 200);
+    CHECK(in < f.pixels() / 10);
+    const double density_in = static_cast<double>(in_hit) / static_cast<double>(in);
+    const double density_out = static_cast<double>(out_hit) / static_cast<double>(out);
+    CHECK(density_in > 10 * density_out);
+    CHECK(static_cast<double>(in_hit) > 0.25 * static_cast<double>(in_hit + out_hit));
+}
+
+TEST_CASE("failed bucket: a NaN square in half A only", "[sim][scenes]") {
+    const sim::frame f = sim::simulate(sim::named_scene("failed_bucket", 256, 192, 6));
+    std::size_t bad[2] = {0, 0};
+    for (std::size_t i = 0; i < f.pixels(); ++i)
+        for (int h = 0; h < 2; ++h) {
+            const bool nan = std::isnan(f.color[h][i * 3]) && std::isnan(f.variance[h][i * 3 + 2]);
+            CHECK(nan == f.bad(h, i));
+            bad[h] += f.bad(h, i);
+        }
+    CHECK(bad[0] == 32u * 32u);  // 1/8 of the width, square
+    CHECK(bad[1] == 0);
+    for (std::size_t i = 0; i < f.pixels() * 3; ++i) CHECK(std::isfinite(f.expected[i]));
+}
+
+TEST_CASE("interior: dark, noisy everywhere, moderate dense fireflies, a bright ceiling", "[sim][scenes]") {
+    const sim::scene s = sim::named_scene("interior", 400, 300, 8);
+    const sim::frame f = sim::simulate(s);
+    const std::size_t np = f.pixels();
+    std::size_t dark = 0, hl = 0, noisy = 0;
+    double peak = 0;
+    for (std::size_t i = 0; i < np; ++i) {
+        dark += luminance(f.expected, i) < 0.5;
+        hl += f.highlight[i];
+        noisy += f.variance[0][i * 3] > 0 && f.variance[1][i * 3] > 0;
+        peak = std::max(peak, luminance(f.expected, i));
+    }
+    CHECK(static_cast<double>(dark) / static_cast<double>(np) > 0.82);
+    CHECK(static_cast<double>(dark) / static_cast<double>(np) < 0.92);
+    CHECK(peak > 2.0);
+    CHECK(hl > np / 20);
+    CHECK(noisy == np);
+    CHECK(hit_share(f, 0) == Approx(0.08).epsilon(0.1));
+    // Moderate: a single firefly adds 2-20x the pixel's ordinary radiance.
+    const double pn = -std::log1p(-s.firefly_pixel_rate), mean_ratio = 18.0 / std::log(10.0);
+    std::size_t ok = 0, hits = 0;
+    for (std::size_t i = 0; i < np; ++i) {
+        if (f.firefly(0, i) <= 0) continue;
+        const double pixel = luminance(f.expected, i) / (1.0 + pn * mean_ratio);
+        const double ratio = f.firefly(0, i) / pixel;
+        ++hits;
+        ok += ratio > 1.99 && ratio < 40.0;
+    }
+    CHECK(static_cast<double>(ok) > 0.99 * static_cast<double>(hits));
+    // Heavy-tailed samples: (A - B) has positive excess kurtosis on ordinary pixels.
+    double m2 = 0, m4 = 0;
+    std::size_t n = 0;
+    for (std::size_t i = 0; i < np; ++i) {
+        if (f.firefly(0, i) > 0 || f.firefly(1, i) > 0 || f.highlight[i]) continue;
+        const double d = (f.color[0][i * 3] - f.color[1][i * 3]) / f.expected[i * 3];
+        m2 += d * d;
+        m4 += d * d * d * d;
+        ++n;
+    }
+    m2 /= static_cast<double>(n);
+    m4 /= static_cast<double>(n);
+    CHECK(m4 / (m2 * m2) > 3.2);
+}
+
+TEST_CASE("decades: three decades of brightness, rare strong fireflies", "[sim][scenes]") {
+    const sim::frame f = sim::simulate(sim::named_scene("decades", 512, 384, 9));
+    double lo = 1e30, hi = 0;
+    for (std::size_t i = 0; i < f.pixels(); ++i) {
+        lo = std::min(lo, luminance(f.expected, i));
+        hi = std::max(hi, luminance(f.expected, i));
+    }
+    CHECK(lo < 0.012);
+    CHECK(lo > 0.008);
+    CHECK(hi > 8.0);
+    CHECK(hi < 12.0);
+    const double share = 0.5 * (hit_share(f, 0) + hit_share(f, 1));
+    CHECK(share > 0.0003);
+    CHECK(share < 0.0008);
+    const double pn = -std::log1p(-0.0005), mean_ratio = 970.0 / std::log(1000.0 / 30.0);
+    for (std::size_t i = 0; i < f.pixels(); ++i)
+        if (f.firefly(0, i) > 0) {
+            const double ratio = f.firefly(0, i) / (luminance(f.expected, i) / (1.0 + pn * mean_ratio));
+            CHECK(ratio > 29.0);
+            CHECK(ratio < 2100.0);
+        }
+}
+
+TEST_CASE("fog: uniformly noisy, 91% dark, a bright beam, no fireflies", "[sim][scenes]") {
+    const sim::frame f = sim::simulate(sim::named_scene("fog", 320, 240, 10));
+    CHECK(f.firefly_energy[0].empty());
+    CHECK(f.firefly_energy[1].empty());
+    double beam = 0, dark = 0;
+    for (std::size_t i = 0; i < f.pixels(); ++i) {
+        beam += f.highlight[i];
+        dark += luminance(f.expected, i) < 0.5 ? 1 : 0;
+        CHECK(f.variance[0][i * 3] > 0);
+    }
+    const double np = static_cast<double>(f.pixels());
+    CHECK(beam / np > 0.07);
+    CHECK(beam / np < 0.11);
+    CHECK(dark / np > 0.88);
+    CHECK(dark / np < 0.93);
+}
+
+TEST_CASE("calibration scenes: every effect but fireflies, gamma samples, unbiased variance", "[sim][scenes]") {
+    for (const double shape : {1.0, 4.0, 16.0})
+        for (const int spp : {4, 64, 1024}) {
+            const sim::scene s = sim::null_scene(11, shape, spp, 96, 72);
+            INFO(s.name);
+            CHECK(sim::named_scene(s.name, 96, 72, 11).noise == s.noise);
+            const sim::frame f = sim::simulate(s);
+            CHECK(f.firefly_energy[0].empty());
+            CHECK(f.nonfinite[0].empty());
+            CHECK(!f.alpha.empty());
+            std::size_t hl = 0;
+            double d2 = 0, v = 0, sum = 0, ref = 0;
+            for (std::size_t i = 0; i < f.pixels(); ++i) {
+                hl += f.highlight[i];
+                CHECK((f.touched[i] & (sim::fireflies | sim::caustics | sim::nonfinite | sim::failed_bucket)) == 0);
+                for (int c = 0; c < 3; ++c) {
+                    const std::size_t j = i * 3 + c;
+                    if (f.expected[j] <= 0) continue;
+                    // Relative to the pixel's level, so that every pixel weighs the same.
+                    const double e2 = static_cast<double>(f.expected[j]) * f.expected[j];
+                    const double d = f.color[0][j] - f.color[1][j];
+                    d2 += d * d / e2;
+                    v += (f.variance[0][j] + f.variance[1][j]) / e2;
+                    sum += f.color[0][j] + f.color[1][j];
+                    ref += 2.0 * f.expected[j];
+                    CHECK(std::isfinite(f.color[0][j]));
+                    CHECK(f.variance[0][j] >= 0);
+                }
+            }
+            CHECK(hl > 0);
+            CHECK(d2 / v == Approx(1.0).epsilon(0.12));
+            CHECK(sum / ref == Approx(1.0).epsilon(0.03));
+        }
+}
+
+TEST_CASE("per-sample laws: the sample mean and variance have the right moments", "[sim][samples]") {
+    // Over many pixels: E[mean] = 1, E[S^2] = s^2, Var(S^2) and Cov(mean, S^2) as the law says,
+    // both where every sample is drawn (m <= 64) and where the approximation is used.
+    for (const sim::distribution d : {sim::distribution::gamma, sim::distribution::lognormal})
+        for (const double s : {0.25, 0.5, 1.0})
+            for (const std::uint64_t m : {8ull, 48ull, 256ull, 1024ull}) {
+                const int trials = 40000;
+                double mean = 0, s2 = 0, s2s2 = 0, ms2 = 0;
+                for (int t = 0; t < trials; ++t) {
+                    sim::detail::counter_rng r(5, 0, static_cast<std::uint64_t>(t), m);
+                    const sim::detail::sample_moments o = sim::detail::draw_samples(r, d, s, m);
+                    const double v = o.m2 / static_cast<double>(m - 1);
+                    mean += o.mean;
+                    s2 += v;
+                    s2s2 += v * v;
+                    ms2 += o.mean * v;
+                }
+                mean /= trials;
+                s2 /= trials;
+                const double var_s2 = s2s2 / trials - s2 * s2, cov = ms2 / trials - mean * s2;
+                double mu3 = 0, kurt = 0;
+                sim::detail::shape_moments(d, s, mu3, kurt);
+                const double v = s * s, dm = static_cast<double>(m);
+                const double want_var = v * v * (kurt / dm + 2.0 / (dm - 1.0));
+                INFO("law " << static_cast<int>(d) << " s " << s << " m " << m);
+                CHECK(mean == Approx(1.0).epsilon(0.01 * s + 0.001));
+                CHECK(s2 == Approx(v).epsilon(0.03));
+                CHECK(var_s2 == Approx(want_var).epsilon(d == sim::distribution::lognormal && s >= 1.0 ? 0.5 : 0.12));
+                CHECK(cov == Approx(mu3 / dm).epsilon(0.25).margin(0.05 * std::sqrt(v / dm * want_var)));
+            }
+}
+
+TEST_CASE("metrics: energy, pixels made worse, evaluation without firefly arrays", "[sim][metrics]") {
+    const sim::frame f = sim::simulate(sim::named_scene("flat", 64, 48, 12));
+    const std::vector<float>* same[2] = {&f.color[0], &f.color[1]};
+    const sim::accuracy a = sim::evaluate(f, same);
+    CHECK(a.changed == 0);
+    CHECK(a.made_worse == 0);
+    CHECK(a.energy == Approx(1.0).epsilon(0.02));
+    std::vector<float> c0 = f.color[0];
+    const std::size_t i = 100, j = 200;
+    for (int c = 0; c < 3; ++c) {
+        c0[i * 3 + c] = f.expected[i * 3 + c] * 3.0f;  // further away
+        c0[j * 3 + c] = f.expected[j * 3 + c];         // exact
+    }
+    const std::vector<float>* cleaned[2] = {&c0, &f.color[1]};
+    const sim::accuracy b = sim::evaluate(f, cleaned);
+    CHECK(b.changed == 2);
+    CHECK(b.made_worse == 1);
+    CHECK(sim::made_worse(f.color[0].data(), c0.data(), f.expected.data(), f.pixels()) == 1);
+    CHECK(b.energy > a.energy);
+    std::vector<std::uint8_t> mask(f.pixels(), 0);
+    mask[i] = 1;
+    CHECK(sim::energy_ratio(c0.data(), f.expected.data(), f.pixels(), mask.data()) == Approx(3.0));
+    // K buffers: the unchanged input, and a combined image.
+    sim::scene s = sim::named_scene("highlights", 64, 48, 12);
+    const sim::buffers k4 = sim::simulate_buffers(s, 4);
+    const sim::accuracy c = sim::evaluate_buffers(k4, k4.color);
+    CHECK(c.changed == 0);
+    CHECK(c.highlight_kept == 1.0);
+    CHECK(c.visible > 0);
+    const std::vector<float> all = sim::combine(k4, k4.color);
+    CHECK(sim::evaluate_combined(all.data(), k4.expected, k4.highlight).relmse == Approx(c.relmse));
 }

@@ -8,11 +8,22 @@
 //   highlight_kept     highlight pixels unchanged in both halves / highlight pixels
 //   relmse             mean over pixels and channels of (x - ref)^2 / (ref^2 + 0.01) for the
 //                      combined image (A + B) / 2 against the expected radiance
+//   made_worse         changed pixels (pixel x half) whose squared error against the expected
+//                      radiance grew (a non-finite input counts as an infinite error)
+//   energy             mean brightness of the combined image / the expected image's, over all
+//                      pixels, highlight pixels, and non-highlight pixels (1: no energy lost)
+//
+// For K buffers (simulate_buffers): evaluate_buffers, the same counts over buffers, relmse and
+// energy on the combined image (the spp-weighted mean of the cleaned buffers); and
+// evaluate_combined for a method that outputs one image (median of means and the like).
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <cstring>
+#include <limits>
 #include <vector>
 
 #include "scene.hpp"
@@ -27,6 +38,16 @@ struct accuracy {
     double relmse = 0.0;
     std::size_t visible = 0;   // visible firefly hits (pixel x half)
     std::size_t changed = 0;   // changed pixels (pixel x half)
+    std::size_t made_worse = 0;  // changed pixels (pixel x half) now further from the expected
+    double energy = 1.0;            // combined mean / expected mean
+    double energy_highlight = 1.0;  // the same over highlight pixels
+    double energy_rest = 1.0;       // the same over the other pixels
+};
+
+// One combined image against the ground truth.
+struct combined_accuracy {
+    double relmse = 0.0;
+    double energy = 1.0, energy_highlight = 1.0, energy_rest = 1.0;
 };
 
 // Relative MSE of an interleaved RGB image against a reference (non-finite pixels count
@@ -41,44 +62,140 @@ inline double relmse(const float* img, const float* ref, std::size_t pixels) {
     return pixels ? s / static_cast<double>(pixels * 3) : 0.0;
 }
 
-// `original` is the simulated frame, `cleaned_color[h]` the cleaned RGB colour of half h.
-inline accuracy evaluate(const frame& original, const std::vector<float>* const cleaned_color[2]) {
+// Mean brightness of `img` over the pixels where mask[i] == want (all pixels when mask is
+// null), divided by the reference's over the same pixels; pixels non-finite in either are
+// skipped. 1 when the reference's mean is 0.
+inline double energy_ratio(const float* img, const float* ref, std::size_t pixels,
+                           const std::uint8_t* mask = nullptr, std::uint8_t want = 1) {
+    double si = 0, sr = 0;
+    for (std::size_t i = 0; i < pixels; ++i) {
+        if (mask && mask[i] != want) continue;
+        for (int c = 0; c < 3; ++c) {
+            const double a = img[i * 3 + c], r = ref[i * 3 + c];
+            if (!std::isfinite(a) || !std::isfinite(r)) continue;
+            si += a;
+            sr += r;
+        }
+    }
+    return sr != 0 ? si / sr : 1.0;
+}
+
+// Squared error of one RGB pixel against the reference (infinite when non-finite).
+inline double pixel_error(const float* px, const float* ref) {
+    double e = 0;
+    for (int c = 0; c < 3; ++c) {
+        const double d = static_cast<double>(px[c]) - ref[c];
+        e += d * d;
+    }
+    return std::isfinite(e) ? e : std::numeric_limits<double>::infinity();
+}
+
+// Pixels that `after` changed from `before` and that are now further from `ref`.
+inline std::size_t made_worse(const float* before, const float* after, const float* ref, std::size_t pixels) {
+    std::size_t n = 0;
+    for (std::size_t i = 0; i < pixels; ++i)
+        if (std::memcmp(before + i * 3, after + i * 3, 12) != 0 && pixel_error(after + i * 3, ref + i * 3) > pixel_error(before + i * 3, ref + i * 3))
+            ++n;
+    return n;
+}
+
+// relMSE and energy of one combined image against the expected radiance.
+inline combined_accuracy evaluate_combined(const float* combined, const std::vector<float>& expected,
+                                           const std::vector<std::uint8_t>& highlight) {
+    combined_accuracy a;
+    const std::size_t np = expected.size() / 3;
+    a.relmse = relmse(combined, expected.data(), np);
+    a.energy = energy_ratio(combined, expected.data(), np);
+    if (highlight.size() == np) {
+        a.energy_highlight = energy_ratio(combined, expected.data(), np, highlight.data(), 1);
+        a.energy_rest = energy_ratio(combined, expected.data(), np, highlight.data(), 0);
+    }
+    return a;
+}
+
+namespace detail {
+// The counts of `evaluate` over any number of buffers; `orig(b)` / `clean(b)` give buffer b.
+template <class Truth, class Orig, class Clean>
+accuracy evaluate_counts(const Truth& t, int k, Orig orig, Clean clean) {
     accuracy a;
-    const std::size_t np = original.pixels();
+    const std::size_t np = t.pixels();
     std::size_t vis_hit = 0, changed_true = 0, clean_px = 0, clean_changed = 0, hl = 0, hl_kept = 0;
-    std::vector<float> combined(np * 3);
     for (std::size_t i = 0; i < np; ++i) {
-        bool changed[2];
-        for (int h = 0; h < 2; ++h)
-            changed[h] = std::memcmp(&original.color[h][i * 3], &(*cleaned_color[h])[i * 3], 12) != 0;
-        const double expected = (original.expected[i * 3] + original.expected[i * 3 + 1] + original.expected[i * 3 + 2]) / 3.0;
-        for (int h = 0; h < 2; ++h) {
-            const bool hit = original.firefly_energy[h][i] > 0 || original.nonfinite[h][i];
-            if (original.firefly_energy[h][i] > 10.0 * expected) {
+        const float* ex = &t.expected[i * 3];
+        const double expected = (ex[0] + ex[1] + ex[2]) / 3.0;
+        const bool is_hl = !t.highlight.empty() && t.highlight[i];
+        bool any_changed = false;
+        for (int b = 0; b < k; ++b) {
+            const float* o = &(*orig(b))[i * 3];
+            const float* c = &(*clean(b))[i * 3];
+            const bool changed = std::memcmp(o, c, 12) != 0;
+            any_changed = any_changed || changed;
+            const bool hit = t.firefly(b, i) > 0 || t.bad(b, i);
+            if (t.firefly(b, i) > 0 && t.firefly(b, i) > 10.0 * std::fabs(expected)) {
                 ++a.visible;
-                vis_hit += changed[h] ? 1 : 0;
+                vis_hit += changed ? 1 : 0;
             }
-            if (changed[h]) {
+            if (changed) {
                 ++a.changed;
                 changed_true += hit ? 1 : 0;
+                a.made_worse += pixel_error(c, ex) > pixel_error(o, ex) ? 1 : 0;
             }
-            if (!hit && !original.highlight[i]) {
+            if (!hit && !is_hl) {
                 ++clean_px;
-                clean_changed += changed[h] ? 1 : 0;
+                clean_changed += changed ? 1 : 0;
             }
         }
-        if (original.highlight[i]) {
+        if (is_hl) {
             ++hl;
-            hl_kept += (!changed[0] && !changed[1]) ? 1 : 0;
+            hl_kept += any_changed ? 0 : 1;
         }
-        for (int c = 0; c < 3; ++c)
-            combined[i * 3 + c] = 0.5f * (*cleaned_color[0])[i * 3 + c] + 0.5f * (*cleaned_color[1])[i * 3 + c];
     }
     a.recall = a.visible ? static_cast<double>(vis_hit) / static_cast<double>(a.visible) : 1.0;
     a.precision = a.changed ? static_cast<double>(changed_true) / static_cast<double>(a.changed) : 1.0;
     a.false_positive = clean_px ? static_cast<double>(clean_changed) / static_cast<double>(clean_px) : 0.0;
     a.highlight_kept = hl ? static_cast<double>(hl_kept) / static_cast<double>(hl) : 1.0;
-    a.relmse = relmse(combined.data(), original.expected.data(), np);
+    return a;
+}
+
+inline void set_combined(accuracy& a, const combined_accuracy& c) {
+    a.relmse = c.relmse;
+    a.energy = c.energy;
+    a.energy_highlight = c.energy_highlight;
+    a.energy_rest = c.energy_rest;
+}
+}  // namespace detail
+
+// `original` is the simulated frame, `cleaned_color[h]` the cleaned RGB colour of half h.
+inline accuracy evaluate(const frame& original, const std::vector<float>* const cleaned_color[2]) {
+    accuracy a = detail::evaluate_counts(
+        original, 2, [&](int b) { return &original.color[b]; }, [&](int b) { return cleaned_color[b]; });
+    const std::size_t np = original.pixels();
+    std::vector<float> combined(np * 3);
+    for (std::size_t i = 0; i < np * 3; ++i)
+        combined[i] = 0.5f * (*cleaned_color[0])[i] + 0.5f * (*cleaned_color[1])[i];
+    detail::set_combined(a, evaluate_combined(combined.data(), original.expected, original.highlight));
+    return a;
+}
+
+// The combined image of K buffers: their mean weighted by samples (the estimate of all samples).
+inline std::vector<float> combine(const buffers& original, const std::vector<std::vector<float>>& color) {
+    std::vector<float> out(original.pixels() * 3, 0.0f);
+    double total = 0;
+    for (int s : original.spp) total += s;
+    for (std::size_t b = 0; b < color.size() && b < original.spp.size(); ++b) {
+        const float wgt = static_cast<float>(original.spp[b] / total);
+        for (std::size_t i = 0; i < out.size(); ++i) out[i] += wgt * color[b][i];
+    }
+    return out;
+}
+
+// K buffers: `cleaned[b]` is buffer b's cleaned RGB colour (as many as original.count()).
+inline accuracy evaluate_buffers(const buffers& original, const std::vector<std::vector<float>>& cleaned) {
+    const int k = std::min(original.count(), static_cast<int>(cleaned.size()));
+    accuracy a = detail::evaluate_counts(
+        original, k, [&](int b) { return &original.color[b]; }, [&](int b) { return &cleaned[b]; });
+    const std::vector<float> combined = combine(original, cleaned);
+    detail::set_combined(a, evaluate_combined(combined.data(), original.expected, original.highlight));
     return a;
 }
 
