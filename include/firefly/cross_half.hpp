@@ -12,7 +12,7 @@
 // The frame's final pixel is (A' + B) / 2. With A' = a S + (1 - a) B(p) its expected error is
 // (a^2 MSE(S) + (2 - a)^2 vB) / 4, least at a = 2 vB / (MSE(S) + vB), clamped to [0, 1]:
 // the spatial estimate is used where it lowers the expected error of the frame, and in
-// detail, at edges and inside a failed bucket (no readable neighbour) A' is B(p) itself.
+// detail and at edges A' is B(p) itself or close to it.
 // The stored variance of A' is its own: a^2 MSE(S) + (1 - a)^2 vB (per channel). Note that
 // A' and B are then correlated, so (vA + vB) / 4 understates the final pixel's variance
 // there; the masks mark these pixels (mask_bits::other_half).
@@ -40,11 +40,12 @@ struct half_views {
 namespace detail {
 
 // The estimate of pixel (x, y) of half `own` from the other half. readable(xx, yy): the
-// neighbour is a clean pixel in both halves. blend = false: the other half's value alone.
+// neighbour is a clean pixel in both halves; readable_other: in the other half. blend = false: the other half's value alone.
 // out: colour channels, then variance channels. Returns the spatial weight a.
-template <class C, class V, class Readable>
+template <class C, class V, class Readable, class ReadableOther>
 double cross_half_estimate(const half_views<C, V>& own, const half_views<C, V>& other, const gaussian_kernel& kernel,
-                           double calibration, bool blend, int x, int y, Readable&& readable, double* out) {
+                           double calibration, bool blend, int x, int y, Readable&& readable,
+                           ReadableOther&& readable_other, double* out) {
     const int nc = own.color.channels(), nv = own.variance.channels();
     const int nd = nc < 3 ? nc : 3;  // colour channels that decide (a 4th is carried along)
     double xo[4], vo[4];
@@ -52,22 +53,41 @@ double cross_half_estimate(const half_views<C, V>& own, const half_views<C, V>& 
     for (int c = 0; c < nv; ++c) vo[c] = std::max(other.variance.load(x, y, c), 0.0);
     double a = 0.0;
     double s[8] = {}, vs[8] = {};  // [0, n): own half, [n, 2n): other half
-    if (blend) {
+    // Both halves' channels side by side; RGB (6 values) at compile time. `mine` is the half
+    // the spatial estimate comes from: the own half, or the other one where no neighbour of
+    // the own half is clean (a failed bucket): then S is the other half's S_B, independent
+    // of B(p) all the same.
+    auto sums = [&](auto nc_const, auto nv_const, const half_views<C, V>& mine, auto&& can_read) {
+        constexpr int NC = decltype(nc_const)::value, NV = decltype(nv_const)::value;
         const int w = own.color.width(), h = own.color.height();
-        const double wsum = kernel_sum<1, 0>(
-            kernel, x, y, w, h, 2 * nc, readable,
+        const double wsum = kernel_sum<1, NC>(
+            kernel, x, y, w, h, 2 * nc, can_read,
             [&](int xx, int yy, double* v) {
-                for (int c = 0; c < nc; ++c) v[c] = own.color.load(xx, yy, c), v[nc + c] = other.color.load(xx, yy, c);
+                for (int c = 0; c < nc; ++c) v[c] = mine.color.load(xx, yy, c), v[nc + c] = other.color.load(xx, yy, c);
             },
             s);
-        (void)kernel_sum<2, 0>(
-            kernel, x, y, w, h, 2 * nv, readable,
-            [&](int xx, int yy, double* v) {
-                for (int c = 0; c < nv; ++c)
-                    v[c] = std::max(own.variance.load(xx, yy, c), 0.0),
-                    v[nv + c] = std::max(other.variance.load(xx, yy, c), 0.0);
-            },
-            vs);
+        if (wsum > 0)
+            (void)kernel_sum<2, NV>(
+                kernel, x, y, w, h, 2 * nv, can_read,
+                [&](int xx, int yy, double* v) {
+                    for (int c = 0; c < nv; ++c)
+                        v[c] = std::max(mine.variance.load(xx, yy, c), 0.0),
+                        v[nv + c] = std::max(other.variance.load(xx, yy, c), 0.0);
+                },
+                vs);
+        return wsum;
+    };
+    auto sums_for = [&](const half_views<C, V>& mine, auto&& can_read) {
+        using I0 = std::integral_constant<int, 0>;
+        using I2 = std::integral_constant<int, 2>;
+        using I6 = std::integral_constant<int, 6>;
+        return nc == 3 && nv == 3   ? sums(I6{}, I6{}, mine, can_read)
+               : nc == 3 && nv == 1 ? sums(I6{}, I2{}, mine, can_read)
+                                    : sums(I0{}, I0{}, mine, can_read);
+    };
+    if (blend) {
+        double wsum = sums_for(own, readable);
+        if (!(wsum > 0)) wsum = sums_for(other, readable_other);
         if (wsum > 0) {
             for (int c = 0; c < 2 * nc; ++c) s[c] /= wsum;
             for (int c = 0; c < 2 * nv; ++c) vs[c] /= wsum * wsum;

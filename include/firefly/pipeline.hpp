@@ -559,6 +559,7 @@ private:
             const std::size_t q = index(xx, yy, w);
             return clean(ls[q]) && clean(lo[q]);
         };
+        auto readable_other = [&](int xx, int yy) { return clean(lo[index(xx, yy, w)]); };
         double out[8];
         for (const std::uint32_t p : s.fix) {
             const int x = static_cast<int>(p % static_cast<std::uint32_t>(w));
@@ -566,7 +567,7 @@ private:
             if (cls(lo[p]) == nonfinite_class || (lo[p] & fix_bit)) continue;
             if (!other.alpha.empty() && !(other.alpha.load(x, y) > 0)) continue;
             (void)detail::cross_half_estimate(hv[0], hv[1], s.recon.kernel_, rep.variance_calibration,
-                                              options_.blend_spatial, x, y, readable, out);
+                                              options_.blend_spatial, x, y, readable, readable_other, out);
             s.cross.push_back(p);
             s.cross_values.insert(s.cross_values.end(), out, out + nch);
         }
