@@ -1,61 +1,100 @@
 // Accuracy against time: every method and configuration on every named simulated scene
-// (2048x1080 by default; FIREFLY_ACCURACY_SIZE=WxH to change), and on the real render in
-// ../shared/data when present. Each benchmark's time is one frame (both halves); its
-// counters are the ground-truth metrics of firefly/sim/metrics.hpp. Run with
-// --benchmark_format=json and turn the output into a table and a Pareto plot with
-// bench/accuracy_report.py.
+// (2048x1080 by default; FIREFLY_ACCURACY_SIZE=WxH to change), and on the real renders in
+// ../shared/data when present (cycles-caustics, cycles-interior: half buffers with variance;
+// cycles-caustics-seeds: 8 renders with different seeds, split 4 + 4 into two halves whose
+// variance is the renders' spread, and used whole by the K-buffer estimators). Each
+// benchmark's time is one frame; its counters are described in docs/accuracy.md and
+// computed in count_metrics below. Run with --benchmark_format=json and turn the output into
+// tables and a Pareto plot with bench/accuracy_report.py.
+//
+// FIREFLY_ACCURACY_IMAGES=DIR writes, per scene, every downstream method's combined output
+// and the reference (DIR/<scene>/<method>.pfm) for bench/downstream.py, NL-means after each
+// prefilter. Simulated scenes are cropped around the centre to FIREFLY_ACCURACY_CROP (default
+// 320x180), and the K-buffer variants (name@kK) are not written: NL-means is slow.
 #include <benchmark/benchmark.h>
 
 #include <firefly/firefly.hpp>
 #include <firefly/sim/metrics.hpp>
 #include <firefly/sim/scene.hpp>
 
+#include <sys/stat.h>
+
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <functional>
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "../bench/peers.hpp"
+#include "image_io.hpp"
 #include "pfm.hpp"
 
 using namespace firefly;
 
 namespace {
 
-using method = std::function<void(half_buffer<float>&, half_buffer<float>&)>;
+// One benchmark scene: the two halves every half-buffer method cleans, the K buffers the
+// K-buffer estimators read (the halves themselves when the scene has no more), the
+// reference, and the simulator's ground truth when there is one.
+struct scene_data {
+    std::string name;
+    int w = 0, h = 0;
+    std::vector<float> color[2], variance[2], alpha;
+    std::vector<std::vector<float>> buffers;  // K x RGB; empty: the halves
+    std::vector<float> reference;             // RGB
+    std::vector<float> input;                 // (A + B) / 2 as given
+    const sim::frame* truth = nullptr;
+    std::size_t pixels() const { return static_cast<std::size_t>(w) * static_cast<std::size_t>(h); }
+    firefly_peers::buffer_list buffer_list() const {
+        firefly_peers::buffer_list b;
+        if (buffers.empty())
+            for (const auto& c : color) b.push_back(c.data());
+        for (const auto& c : buffers) b.push_back(c.data());
+        return b;
+    }
+};
+
+using halves_fn = std::function<void(half_buffer<float>&, half_buffer<float>&)>;
+using buffers_fn = std::function<void(const firefly_peers::buffer_list&, std::size_t, float*)>;
 
 struct config {
     std::string name;
-    method run;
+    halves_fn halves;    // a method on the two halves, or ...
+    buffers_fn buffers;  // ... an estimator over the K buffers
+    bool downstream = false;  // write its output for the NL-means column
 };
 
-method firefly_with(detector_options o) {
+halves_fn firefly_with(detector_options o) {
     auto d = std::make_shared<detector>(o);
     return [d](half_buffer<float>& a, half_buffer<float>& b) { (void)d->process(a, b); };
 }
-method peer(void (*f)(const image_view<float>&, const image_view<float>&)) {
+
+// A peer cleans each half on its own, after the shared non-finite repair.
+halves_fn peer(std::function<void(const image_view<float>&, const image_view<float>&)> f) {
     return [f](half_buffer<float>& a, half_buffer<float>& b) {
+        firefly_peers::repair_nonfinite(a.color, a.variance, b.color, b.variance);
         f(a.color, a.variance);
         f(b.color, b.variance);
     };
 }
 
-std::vector<config> configs() {
-    std::vector<config> c;
+void add_firefly_configs(std::vector<config>& c) {
     detector_options def;
-    c.push_back({"firefly", firefly_with(def)});
-    auto with = [&](const char* name, auto edit) {
+    c.push_back({"firefly", firefly_with(def), {}, true});
+    auto with = [&](const char* name, auto edit, bool downstream = false) {
         detector_options o = def;
         edit(o);
-        c.push_back({name, firefly_with(o)});
+        c.push_back({name, firefly_with(o), {}, downstream});
     };
     with("firefly_paper", [](detector_options& o) {  // the paper as written
         o.highlight.rule = highlight_rule::same_pixel;
         o.highlight.min_excess_z = 0;
-    });
+    }, true);
     with("firefly_alpha0.01", [](detector_options& o) { o.alpha = 0.01; });
     with("firefly_alpha0.2", [](detector_options& o) { o.alpha = 0.2; });
     with("firefly_bound3.0", [](detector_options& o) { o.bound_threshold = 3.0; });
@@ -71,81 +110,258 @@ std::vector<config> configs() {
     with("firefly_tol1e-2", [](detector_options& o) { o.reconstruction.tolerance = 1e-2; });
     with("firefly_hill_lambdas", [](detector_options& o) { o.lambdas = lambda_method::hill; });
     with("firefly_normal_lambdas", [](detector_options& o) { o.lambdas = lambda_method::normal; });
-    c.push_back({"median3x3", peer(&firefly_peers::median3x3)});
-    c.push_back({"cycles_prefilter", peer(&firefly_peers::cycles_prefilter)});
+}
+
+void add_peer_configs(std::vector<config>& c) {
+    c.push_back({"input", [](half_buffer<float>&, half_buffer<float>&) {}, {}, true});
+    c.push_back({"median3x3", peer(&firefly_peers::median3x3), {}, true});
+    c.push_back({"cycles_prefilter", peer(&firefly_peers::cycles_prefilter), {}, true});
     c.push_back({"bcd_spikes", peer([](const image_view<float>& col, const image_view<float>& var) {
                      firefly_peers::bcd_spikes(col, var);
-                 })});
-    c.push_back({"nrd_clamp", peer(&firefly_peers::nrd_clamp)});
+                 }), {}, true});
+    c.push_back({"nrd_clamp", peer(&firefly_peers::nrd_clamp), {}, true});
     c.push_back({"clamp4", peer([](const image_view<float>& col, const image_view<float>& var) {
                      firefly_peers::fixed_clamp(col, var, 4.0f);
-                 })});
+                 }), {}, true});
     c.push_back({"clamp16", peer([](const image_view<float>& col, const image_view<float>& var) {
                      firefly_peers::fixed_clamp(col, var, 16.0f);
-                 })});
+                 }), {}, false});
+}
+
+// The K-buffer estimators on K buffers (on the halves, K = 2, all reduce to the mean).
+void add_buffer_configs(std::vector<config>& c, int k) {
+    const std::string K = std::to_string(k);
+    const bool ds = k > 2;  // at K = 2 their output is the input's: no NL-means column needed
+    c.push_back({"mean_k" + K, {}, &firefly_peers::mean_of_buffers, false});
+    std::vector<int> groups = {k};
+    if (k % 2 == 0 && k / 2 >= 3) groups.push_back(k / 2);
+    for (int m : groups) {
+        const std::string M = std::to_string(m);
+        c.push_back({"mon_k" + K + "_m" + M, {}, [m](const firefly_peers::buffer_list& b, std::size_t n, float* out) {
+                         firefly_peers::median_of_means(b, n, m, out);
+                     }, ds});
+        for (double t : {0.1, 0.25, 0.4}) {
+            if (m == 2 && t != 0.25) continue;  // two means: every threshold gives the mean
+            char name[64];
+            std::snprintf(name, sizeof name, "gmon_k%d_m%d_t%.2f", k, m, t);
+            c.push_back({name, {}, [m, t](const firefly_peers::buffer_list& b, std::size_t n, float* out) {
+                             firefly_peers::gmon(b, n, m, t, out);
+                         }, ds && t == 0.25});
+        }
+    }
+}
+
+// On K-buffer scenes (K > 2) only firefly at defaults and as the paper wrote it: the
+// configurations are compared on the half-buffer scenes.
+std::vector<config> configs(int k) {
+    std::vector<config> c;
+    add_firefly_configs(c);
+    if (k > 2) c.resize(2);
+    add_peer_configs(c);
+    add_buffer_configs(c, k);
     return c;
 }
 
-struct work {
-    std::vector<float> col[2], var[2];
-    std::vector<float> alpha;
-    half_buffer<float> half[2];
-    void load(const std::vector<float>* c, const std::vector<float>* v, const std::vector<float>& a, int w, int h) {
-        alpha = a;
-        for (int i = 0; i < 2; ++i) {
-            col[i] = c[i];
-            var[i] = v[i];
-            half[i].color = *make_image_view(col[i].data(), w, h, 3);
-            half[i].variance = *make_image_view(var[i].data(), w, h, 3);
-            if (!alpha.empty()) half[i].alpha = *make_image_view(static_cast<const float*>(alpha.data()), w, h, 1);
-        }
-    }
-};
+// ---------------------------------------------------------------------------------------
+// Counters.
 
-void run_scene(benchmark::State& st, const sim::frame* f, config cfg) {
-    work wk;
-    for (auto _ : st) {
-        st.PauseTiming();
-        wk.load(f->color, f->variance, f->alpha, f->width, f->height);
-        st.ResumeTiming();
-        cfg.run(wk.half[0], wk.half[1]);
+// Per-pixel relative squared error, summed over the channels; non-finite: infinite.
+double pixel_error(const float* x, const float* ref) {
+    double e = 0;
+    for (int c = 0; c < 3; ++c) {
+        const double d = static_cast<double>(x[c]) - ref[c];
+        e += d * d / (static_cast<double>(ref[c]) * ref[c] + 0.01);
     }
-    const std::vector<float>* cleaned[2] = {&wk.col[0], &wk.col[1]};
-    const sim::accuracy a = sim::evaluate(*f, cleaned);
+    return std::isfinite(e) ? e : HUGE_VAL;
+}
+
+// A pixel is changed when a channel moved by more than float round-off (the K-buffer mean
+// sums in another order than (A + B) / 2); NaN against NaN is unchanged.
+bool pixel_changed(const float* out, const float* in) {
+    for (int c = 0; c < 3; ++c) {
+        if (out[c] == in[c] || (std::isnan(out[c]) && std::isnan(in[c]))) continue;
+        if (!(std::fabs(out[c] - in[c]) <= 1e-6f * std::fabs(in[c]))) return true;
+    }
+    return false;
+}
+
+// Dark: reference brightness below the median of the lit pixels; bright: at or above their
+// 95th percentile. Lit: reference brightness > 0.
+void brightness_cuts(const std::vector<float>& ref, double& dark, double& bright) {
+    std::vector<float> lit;
+    for (std::size_t i = 0; i + 2 < ref.size(); i += 3) {
+        const float l = (ref[i] + ref[i + 1] + ref[i + 2]) / 3.0f;
+        if (l > 0) lit.push_back(l);
+    }
+    dark = bright = 0;
+    if (lit.empty()) return;
+    std::sort(lit.begin(), lit.end());
+    dark = lit[lit.size() / 2];
+    bright = lit[std::min(lit.size() - 1, lit.size() * 95 / 100)];
+}
+
+// relMSE, changed, made worse and energy of a combined output against the reference.
+void count_metrics(benchmark::State& st, const scene_data& s, const std::vector<float>& out) {
+    const std::size_t np = s.pixels();
+    double dark_cut, bright_cut;
+    brightness_cuts(s.reference, dark_cut, bright_cut);
+    std::size_t changed = 0, worse = 0;
+    double sum_out[3] = {0, 0, 0}, sum_ref[3] = {0, 0, 0};  // all, dark, bright
+    for (std::size_t p = 0; p < np; ++p) {
+        const float* o = &out[p * 3];
+        const float* in = &s.input[p * 3];
+        const float* r = &s.reference[p * 3];
+        if (pixel_changed(o, in)) {
+            ++changed;
+            worse += pixel_error(o, r) > pixel_error(in, r);
+        }
+        const double lo = (static_cast<double>(o[0]) + o[1] + o[2]) / 3.0, lr = (static_cast<double>(r[0]) + r[1] + r[2]) / 3.0;
+        if (!std::isfinite(lo)) continue;
+        const bool region[3] = {true, lr > 0 && lr < dark_cut, lr >= bright_cut && lr > 0};
+        for (int k = 0; k < 3; ++k)
+            if (region[k]) {
+                sum_out[k] += lo;
+                sum_ref[k] += lr;
+            }
+    }
+    st.counters["relmse"] = sim::relmse(out.data(), s.reference.data(), np);
+    st.counters["changed"] = static_cast<double>(changed) / static_cast<double>(np);
+    st.counters["worse"] = static_cast<double>(worse) / static_cast<double>(np);
+    st.counters["worse_of_changed"] = changed ? static_cast<double>(worse) / static_cast<double>(changed) : 0.0;
+    const char* names[3] = {"energy", "energy_dark", "energy_bright"};
+    for (int k = 0; k < 3; ++k) st.counters[names[k]] = sum_ref[k] > 0 ? sum_out[k] / sum_ref[k] : 1.0;
+}
+
+// Recall, false positives, highlights kept, from the simulator's ground truth.
+void count_truth(benchmark::State& st, const scene_data& s, const std::vector<float>* halves[2]) {
+    if (!s.truth) return;
+    const sim::accuracy a = sim::evaluate(*s.truth, halves);
     st.counters["recall"] = a.recall;
     st.counters["precision"] = a.precision;
     st.counters["false_positive"] = a.false_positive;
     st.counters["highlight_kept"] = a.highlight_kept;
-    st.counters["relmse"] = a.relmse;
 }
 
-struct real_frame {
-    int w = 0, h = 0;
-    std::vector<float> color[2], variance[2], reference;
+// ---------------------------------------------------------------------------------------
+// Images for the downstream column.
+
+std::string image_dir() {
+    const char* d = std::getenv("FIREFLY_ACCURACY_IMAGES");
+    return d && *d ? std::string(d) : std::string();
+}
+
+// The centre crop written for a scene: whole real renders, simulated scenes cropped.
+void crop_rect(const scene_data& s, int& x0, int& y0, int& cw, int& ch) {
+    cw = s.w;
+    ch = s.h;
+    if (s.truth) {
+        int mw = 320, mh = 180;
+        if (const char* c = std::getenv("FIREFLY_ACCURACY_CROP")) std::sscanf(c, "%dx%d", &mw, &mh);
+        cw = std::min(cw, mw);
+        ch = std::min(ch, mh);
+    }
+    x0 = (s.w - cw) / 2;
+    y0 = (s.h - ch) / 2;
+}
+
+void write_image(const scene_data& s, const std::string& method, const std::vector<float>& rgb) {
+    const std::string dir = image_dir();
+    if (dir.empty() || s.name.find("@k") != std::string::npos) return;  // NL-means costs: not on @k
+    ::mkdir(dir.c_str(), 0755);
+    ::mkdir((dir + "/" + s.name).c_str(), 0755);
+    int x0, y0, cw, ch;
+    crop_rect(s, x0, y0, cw, ch);
+    firefly_tools::pfm_image img;
+    img.width = cw;
+    img.height = ch;
+    img.channels = 3;
+    img.pixels.resize(static_cast<std::size_t>(cw) * ch * 3);
+    for (int y = 0; y < ch; ++y)
+        std::memcpy(&img.pixels[static_cast<std::size_t>(y) * cw * 3],
+                    &rgb[(static_cast<std::size_t>(y0 + y) * s.w + x0) * 3], static_cast<std::size_t>(cw) * 3 * sizeof(float));
+    const std::string err = firefly_tools::write_pfm(dir + "/" + s.name + "/" + method + ".pfm", img);
+    if (!err.empty()) std::fprintf(stderr, "note: %s\n", err.c_str());
+}
+
+// ---------------------------------------------------------------------------------------
+// Running one method on one scene.
+
+struct work {
+    std::vector<float> col[2], var[2];
+    half_buffer<float> half[2];
+    void load(const scene_data& s) {
+        for (int i = 0; i < 2; ++i) {
+            col[i] = s.color[i];
+            var[i] = s.variance[i];
+            half[i].color = *make_image_view(col[i].data(), s.w, s.h, 3);
+            half[i].variance = *make_image_view(var[i].data(), s.w, s.h, 3);
+            if (!s.alpha.empty()) half[i].alpha = *make_image_view(s.alpha.data(), s.w, s.h, 1);
+        }
+    }
 };
 
-void run_real(benchmark::State& st, const real_frame* f, config cfg) {
+// The combined image of a half-buffer method, and for the "input" row the input after the
+// shared repair (what the denoiser alone is given: NL-means cannot take NaN).
+std::vector<float> combine(const std::vector<float>& a, const std::vector<float>& b) {
+    std::vector<float> out(a.size());
+    for (std::size_t i = 0; i < a.size(); ++i) out[i] = 0.5f * (a[i] + b[i]);
+    return out;
+}
+
+void run_halves(benchmark::State& st, const scene_data* s, const config& cfg) {
     work wk;
     for (auto _ : st) {
         st.PauseTiming();
-        wk.load(f->color, f->variance, {}, f->w, f->h);
+        wk.load(*s);
         st.ResumeTiming();
-        cfg.run(wk.half[0], wk.half[1]);
+        cfg.halves(wk.half[0], wk.half[1]);
     }
-    std::vector<float> combined(f->reference.size());
-    std::size_t changed = 0;
-    for (std::size_t i = 0; i < combined.size(); ++i) {
-        combined[i] = 0.5f * (wk.col[0][i] + wk.col[1][i]);
-        changed += wk.col[0][i] != f->color[0][i] || wk.col[1][i] != f->color[1][i];
-    }
-    st.counters["relmse"] = sim::relmse(combined.data(), f->reference.data(), combined.size() / 3);
-    st.counters["changed"] = static_cast<double>(changed) / static_cast<double>(combined.size());
+    const std::vector<float> out = combine(wk.col[0], wk.col[1]);
+    count_metrics(st, *s, out);
+    const std::vector<float>* halves[2] = {&wk.col[0], &wk.col[1]};
+    count_truth(st, *s, halves);
+    if (!cfg.downstream) return;
+    if (cfg.name != "input") return write_image(*s, cfg.name, out);
+    wk.load(*s);
+    firefly_peers::repair_nonfinite(wk.half[0].color, wk.half[0].variance, wk.half[1].color, wk.half[1].variance);
+    write_image(*s, cfg.name, combine(wk.col[0], wk.col[1]));
 }
 
-int register_all() {
-    int w = 2048, h = 1080;
-    if (const char* s = std::getenv("FIREFLY_ACCURACY_SIZE")) std::sscanf(s, "%dx%d", &w, &h);
-    static std::map<std::string, sim::frame> frames;
+void run_buffers(benchmark::State& st, const scene_data* s, const config& cfg) {
+    const firefly_peers::buffer_list bl = s->buffer_list();
+    std::vector<float> out(s->pixels() * 3);
+    for (auto _ : st) cfg.buffers(bl, s->pixels(), out.data());
+    count_metrics(st, *s, out);
+    // Halves for the ground-truth counters: a pixel the estimator left at the input's value
+    // is unchanged in both halves; any other takes the output in both.
+    std::vector<float> h[2] = {s->color[0], s->color[1]};
+    for (std::size_t p = 0; p < s->pixels(); ++p)
+        if (pixel_changed(&out[p * 3], &s->input[p * 3]))
+            for (int i = 0; i < 2; ++i) std::copy_n(&out[p * 3], 3, &h[i][p * 3]);
+    const std::vector<float>* halves[2] = {&h[0], &h[1]};
+    count_truth(st, *s, halves);
+    if (cfg.downstream) write_image(*s, cfg.name, out);
+}
+
+void register_scene(const scene_data* s, int iterations) {
+    const int k = s->buffers.empty() ? 2 : static_cast<int>(s->buffers.size());
+    for (const config& c : configs(k)) {
+        const std::string name = "accuracy/" + s->name + "/" + c.name;
+        auto* b = c.halves ? benchmark::RegisterBenchmark(name.c_str(), run_halves, s, c)
+                           : benchmark::RegisterBenchmark(name.c_str(), run_buffers, s, c);
+        b->Unit(benchmark::kMillisecond)->Iterations(iterations);
+    }
+    write_image(*s, "reference", s->reference);
+}
+
+// ---------------------------------------------------------------------------------------
+// Scenes.
+
+void finish(scene_data& s) {
+    s.input = combine(s.color[0], s.color[1]);
+}
+
+void add_simulated(std::map<std::string, scene_data>& all, std::map<std::string, sim::frame>& frames, int w, int h) {
     std::vector<std::string> names = sim::scene_names();
     names.push_back("highlights@16spp");  // hard: few samples make real highlights noisy
     names.push_back("production@16spp");
@@ -153,33 +369,154 @@ int register_all() {
         const std::size_t at = name.find('@');
         sim::scene sc = sim::named_scene(name.substr(0, at), w, h, 1);
         if (at != std::string::npos) sc.spp = std::atoi(name.c_str() + at + 1);
-        frames[name] = sim::simulate(sc);
-        for (const config& c : configs())
-            benchmark::RegisterBenchmark(("accuracy/" + name + "/" + c.name).c_str(), run_scene, &frames[name], c)
-                ->Unit(benchmark::kMillisecond)
-                ->Iterations(2);
+        const sim::frame& f = frames[name] = sim::simulate(sc);
+        scene_data& s = all[name];
+        s.name = name;
+        s.w = f.width;
+        s.h = f.height;
+        for (int i = 0; i < 2; ++i) {
+            s.color[i] = f.color[i];
+            s.variance[i] = f.variance[i];
+        }
+        s.alpha = f.alpha;
+        s.reference = f.expected;
+        s.truth = &f;
+        finish(s);
     }
-    static real_frame real;
-    const std::string dir = std::string(FIREFLY_SHARED_DATA) + "/cycles-caustics/";
+}
+
+// Half h of a simulated K-buffer frame: the mean of its K/2 buffers (the simulator splits the
+// samples evenly) and the variance of that mean; its ground truth likewise.
+void buffer_half(const sim::buffers& b, int h, sim::frame& f) {
+    const int per = b.count() / 2;
+    const std::size_t n = b.pixels();
+    f.color[h].assign(n * 3, 0.0f);
+    f.variance[h].assign(n * 3, 0.0f);
+    if (!b.firefly_energy.empty() && !b.firefly_energy[0].empty()) f.firefly_energy[h].assign(n, 0.0f);
+    if (!b.nonfinite.empty() && !b.nonfinite[0].empty()) f.nonfinite[h].assign(n, 0);
+    for (int k = h * per; k < (h + 1) * per; ++k) {
+        for (std::size_t i = 0; i < n * 3; ++i) {
+            f.color[h][i] += b.color[k][i] / per;
+            f.variance[h][i] += b.variance[k][i] / (static_cast<float>(per) * per);
+        }
+        for (std::size_t i = 0; i < n && !f.firefly_energy[h].empty(); ++i) f.firefly_energy[h][i] += b.firefly(k, i) / per;
+        for (std::size_t i = 0; i < n && !f.nonfinite[h].empty(); ++i) f.nonfinite[h][i] |= b.bad(k, i) ? 1 : 0;
+    }
+}
+
+// Simulated scenes with K buffers (name@kK): the K-buffer estimators read the K buffers, the
+// half-buffer methods their two halves (K/2 buffers each), the same samples.
+void add_buffer_scenes(std::map<std::string, scene_data>& all, std::map<std::string, sim::frame>& frames, int w, int h) {
+    for (const char* base : {"sparse_fireflies", "highlights", "production", "caustics", "interior", "null_k4_spp64"})
+        for (int k : {4, 8}) {
+            const std::string name = std::string(base) + "@k" + std::to_string(k);
+            sim::buffers b = sim::simulate_buffers(sim::named_scene(base, w, h, 1), k);
+            sim::frame& f = frames[name];
+            f.width = b.width;
+            f.height = b.height;
+            f.effects = b.effects;
+            buffer_half(b, 0, f);
+            buffer_half(b, 1, f);
+            f.alpha = b.alpha;
+            f.expected = b.expected;
+            f.highlight = b.highlight;
+            f.touched = b.touched;
+            scene_data& s = all[name];
+            s.name = name;
+            s.w = f.width;
+            s.h = f.height;
+            s.color[0] = f.color[0];
+            s.color[1] = f.color[1];
+            s.variance[0] = f.variance[0];
+            s.variance[1] = f.variance[1];
+            s.alpha = f.alpha;
+            s.buffers = std::move(b.color);
+            s.reference = f.expected;
+            s.truth = &f;
+            finish(s);
+        }
+}
+
+std::string shared_dir(const char* scene) { return std::string(FIREFLY_SHARED_DATA) + "/" + scene + "/"; }
+
+// A real render with half buffers and variance (PFM copies of the EXR files).
+bool load_halves_render(scene_data& s, const char* scene) {
+    const std::string dir = shared_dir(scene);
     firefly_tools::pfm_image img[5];
     const char* files[5] = {"a_color", "a_variance", "b_color", "b_variance", "reference"};
-    bool ok = true;
-    for (int i = 0; i < 5 && ok; ++i) ok = firefly_tools::read_pfm(dir + files[i] + ".pfm", img[i]).empty();
-    if (ok) {
-        real.w = img[0].width;
-        real.h = img[0].height;
-        real.color[0] = img[0].pixels;
-        real.variance[0] = img[1].pixels;
-        real.color[1] = img[2].pixels;
-        real.variance[1] = img[3].pixels;
-        real.reference = img[4].pixels;
-        for (const config& c : configs())
-            benchmark::RegisterBenchmark(("accuracy/cycles-caustics/" + c.name).c_str(), run_real, &real, c)
-                ->Unit(benchmark::kMillisecond)
-                ->Iterations(3);
-    } else {
-        std::fprintf(stderr, "note: %s absent; the real-render rows are skipped\n", dir.c_str());
+    for (int i = 0; i < 5; ++i) {
+        const std::string err = firefly_tools::read_pfm(dir + files[i] + ".pfm", img[i]);
+        if (!err.empty() || img[i].channels != 3 || img[i].width != img[0].width || img[i].height != img[0].height) {
+            std::fprintf(stderr, "note: %s: %s; its rows are skipped\n", scene, err.empty() ? "bad size" : err.c_str());
+            return false;
+        }
     }
+    s.name = scene;
+    s.w = img[0].width;
+    s.h = img[0].height;
+    s.color[0] = img[0].pixels;
+    s.variance[0] = img[1].pixels;
+    s.color[1] = img[2].pixels;
+    s.variance[1] = img[3].pixels;
+    s.reference = img[4].pixels;
+    finish(s);
+    return true;
+}
+
+// Half h of K seed renders: the mean of its K/2 renders, and the variance of that mean from
+// their spread (sample variance / (K/2)).
+void seed_half(scene_data& s, int h) {
+    const std::size_t n = s.pixels() * 3;
+    const int per = static_cast<int>(s.buffers.size()) / 2;
+    s.color[h].assign(n, 0.0f);
+    s.variance[h].assign(n, 0.0f);
+    for (std::size_t i = 0; i < n; ++i) {
+        double sum = 0, sum2 = 0;
+        for (int j = h * per; j < (h + 1) * per; ++j) sum += s.buffers[j][i];
+        const double m = sum / per;
+        for (int j = h * per; j < (h + 1) * per; ++j) sum2 += (s.buffers[j][i] - m) * (s.buffers[j][i] - m);
+        s.color[h][i] = static_cast<float>(m);
+        s.variance[h][i] = static_cast<float>(sum2 / (per - 1) / per);
+    }
+}
+
+bool load_seed_renders(scene_data& s) {
+    const std::string dir = shared_dir("cycles-caustics-seeds");
+    firefly_tools::pfm_image ref;
+    std::string err = firefly_tools::read_pfm(shared_dir("cycles-caustics") + "reference.pfm", ref);
+    for (int k = 0; k < 8 && err.empty(); ++k) {
+        firefly_tools::image img;
+        err = firefly_tools::read_exr(dir + "render_" + std::to_string(k) + ".exr", {"R", "G", "B"}, img);
+        if (err.empty() && (img.width != ref.width || img.height != ref.height)) err = "render size differs from the reference";
+        if (err.empty()) s.buffers.push_back(std::move(img.pixels));
+    }
+    if (!err.empty()) {
+        std::fprintf(stderr, "note: cycles-caustics-seeds: %s; its rows are skipped\n", err.c_str());
+        return false;
+    }
+    s.name = "cycles-caustics-seeds";
+    s.w = ref.width;
+    s.h = ref.height;
+    s.reference = ref.pixels;
+    seed_half(s, 0);
+    seed_half(s, 1);
+    finish(s);
+    return true;
+}
+
+int register_all() {
+    int w = 2048, h = 1080;
+    if (const char* s = std::getenv("FIREFLY_ACCURACY_SIZE")) std::sscanf(s, "%dx%d", &w, &h);
+    benchmark::AddCustomContext("simulated_frame", std::to_string(w) + "x" + std::to_string(h));
+    static std::map<std::string, sim::frame> frames;
+    static std::map<std::string, scene_data> scenes;
+    add_simulated(scenes, frames, w, h);
+    add_buffer_scenes(scenes, frames, w, h);
+    for (auto& [name, s] : scenes) register_scene(&s, 2);
+    static scene_data real[3];
+    if (load_halves_render(real[0], "cycles-caustics")) register_scene(&real[0], 3);
+    if (load_halves_render(real[1], "cycles-interior")) register_scene(&real[1], 3);
+    if (load_seed_renders(real[2])) register_scene(&real[2], 3);
     return 0;
 }
 const int registered = register_all();

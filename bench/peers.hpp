@@ -11,10 +11,16 @@
 //   nrd_clamp        NRD RELAX anti-firefly: the centre's luminance clamped to the min..max
 //                    of its eight neighbours' luminance.
 //   fixed_clamp      every channel clamped at a fixed value (a renderer's sample clamp).
+//
+// Also here: repair_nonfinite, the non-finite repair every peer gets first (so comparisons
+// measure firefly handling), and the per-pixel estimators over K buffers (mean, median of
+// means, G-MoN).
 #pragma once
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
+#include <limits>
 #include <vector>
 
 #include <firefly/image_view.hpp>
@@ -171,6 +177,173 @@ inline void fixed_clamp(const view& color, const view& /*variance*/, float level
     for (int y = 0; y < color.height(); ++y)
         for (int x = 0; x < color.width(); ++x)
             for (int c = 0; c < 3; ++c) color(x, y, c) = std::min(color(x, y, c), level);
+}
+
+// ---------------------------------------------------------------------------------------
+// The shared non-finite repair every peer gets before it runs, so the tables measure firefly
+// handling rather than NaN handling. A pixel of one half whose colour or variance holds a
+// NaN/Inf takes the other half's colour and variance when those are finite (an unbiased
+// estimate of the same pixel), else the mean of the finite 3x3 neighbours in its own half,
+// else 0. Only pixels that were finite on entry serve as sources, so the order of the two
+// halves does not matter.
+inline bool finite_pixel(const view& c, const view& v, int x, int y) {
+    for (int k = 0; k < 3; ++k)
+        if (!std::isfinite(c(x, y, k)) || !std::isfinite(v(x, y, k))) return false;
+    return true;
+}
+
+inline void repair_half(const view& col, const view& var, const view& other_col, const view& other_var,
+                        const std::vector<unsigned char>& good, const std::vector<unsigned char>& other_good) {
+    const int w = col.width(), h = col.height();
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const std::size_t i = static_cast<std::size_t>(y) * w + x;
+            if (good[i]) continue;
+            if (other_good[i]) {
+                for (int k = 0; k < 3; ++k) {
+                    col(x, y, k) = other_col(x, y, k);
+                    var(x, y, k) = other_var(x, y, k);
+                }
+                continue;
+            }
+            double sc[3] = {0, 0, 0}, sv[3] = {0, 0, 0};
+            int m = 0;
+            for (int yy = std::max(y - 1, 0); yy <= std::min(y + 1, h - 1); ++yy)
+                for (int xx = std::max(x - 1, 0); xx <= std::min(x + 1, w - 1); ++xx) {
+                    if (!good[static_cast<std::size_t>(yy) * w + xx]) continue;
+                    ++m;
+                    for (int k = 0; k < 3; ++k) {
+                        sc[k] += col(xx, yy, k);
+                        sv[k] += var(xx, yy, k);
+                    }
+                }
+            for (int k = 0; k < 3; ++k) {
+                col(x, y, k) = m ? static_cast<float>(sc[k] / m) : 0.0f;
+                var(x, y, k) = m ? static_cast<float>(sv[k] / m) : 0.0f;
+            }
+        }
+}
+
+// Repairs both halves in place; returns the number of pixel x half repaired.
+inline std::size_t repair_nonfinite(const view& a_col, const view& a_var, const view& b_col, const view& b_var) {
+    const int w = a_col.width(), h = a_col.height();
+    std::vector<unsigned char> good_a(static_cast<std::size_t>(w) * h), good_b(good_a.size());
+    std::size_t bad = 0;
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const std::size_t i = static_cast<std::size_t>(y) * w + x;
+            good_a[i] = finite_pixel(a_col, a_var, x, y);
+            good_b[i] = finite_pixel(b_col, b_var, x, y);
+            bad += !good_a[i] + !good_b[i];
+        }
+    if (bad == 0) return 0;
+    // B first: it reads A's pixels only where A was good, which A's repair never changes.
+    repair_half(b_col, b_var, a_col, a_var, good_b, good_a);
+    repair_half(a_col, a_var, b_col, b_var, good_a, good_b);
+    return bad;
+}
+
+// ---------------------------------------------------------------------------------------
+// Per-pixel robust estimators over K buffers of the same pixel (K renders with different
+// seeds, or K sub-buffers; K = 2 gives the halves, where all three reduce to the mean).
+//
+//   mean_of_buffers   the mean of the K buffers: what a renderer outputs.
+//   median_of_means   the K buffers grouped into M consecutive groups of K/M, each group
+//                     averaged, the per-channel median of the M group means (the mean of
+//                     the two middle ones for even M).
+//   gmon              G-MoN (Buisine, Delepoulle and Renaud, "Firefly removal in Monte
+//                     Carlo rendering with adaptive Median of meaNs", EGSR 2021): per
+//                     pixel, the Gini coefficient of the M means, averaged over the
+//                     channels (values shifted to be non-negative, plus a tiny epsilon);
+//                     below the threshold (the paper's 0.25) the mean of the means, else
+//                     their median.
+// Each writes interleaved RGB. Non-finite buffer values are left out of the pixel's values
+// (the same repair as above, generalised: the other buffers hold unbiased estimates).
+using buffer_list = std::vector<const float*>;
+
+inline void group_means(const buffer_list& buf, std::size_t i, int groups, float* out /* groups */) {
+    const int K = static_cast<int>(buf.size()), per = K / groups;
+    for (int g = 0; g < groups; ++g) {
+        double s = 0;
+        int n = 0;
+        for (int j = g * per; j < (g + 1) * per; ++j)
+            if (std::isfinite(buf[j][i])) {
+                s += buf[j][i];
+                ++n;
+            }
+        out[g] = n ? static_cast<float>(s / n) : std::numeric_limits<float>::quiet_NaN();
+    }
+}
+
+// Median of the finite values among v[0..n); 0 when none is.
+inline float finite_median(float* v, int n) {
+    int m = 0;
+    for (int i = 0; i < n; ++i)
+        if (std::isfinite(v[i])) v[m++] = v[i];
+    if (m == 0) return 0.0f;
+    std::sort(v, v + m);
+    return m % 2 ? v[m / 2] : 0.5f * (v[m / 2 - 1] + v[m / 2]);
+}
+
+inline float finite_mean(const float* v, int n) {
+    double s = 0;
+    int m = 0;
+    for (int i = 0; i < n; ++i)
+        if (std::isfinite(v[i])) {
+            s += v[i];
+            ++m;
+        }
+    return m ? static_cast<float>(s / m) : 0.0f;
+}
+
+// Gini coefficient of n values: sum (2i - n - 1) x_(i) / (n sum x), over sorted x shifted to
+// be non-negative.
+inline double gini(float* v, int n) {
+    int m = 0;
+    for (int i = 0; i < n; ++i)
+        if (std::isfinite(v[i])) v[m++] = v[i];
+    if (m < 2) return 0.0;
+    std::sort(v, v + m);
+    const double shift = v[0] < 0 ? -static_cast<double>(v[0]) : 0.0;
+    double sum = 0, weighted = 0;
+    for (int i = 0; i < m; ++i) {
+        const double x = v[i] + shift + 1e-11;
+        sum += x;
+        weighted += (2.0 * (i + 1) - m - 1) * x;
+    }
+    return weighted / (m * sum);
+}
+
+inline void mean_of_buffers(const buffer_list& buf, std::size_t pixels, float* out) {
+    std::vector<float> v(buf.size());
+    for (std::size_t i = 0; i < pixels * 3; ++i) {
+        for (std::size_t j = 0; j < buf.size(); ++j) v[j] = buf[j][i];
+        out[i] = finite_mean(v.data(), static_cast<int>(v.size()));
+    }
+}
+
+inline void median_of_means(const buffer_list& buf, std::size_t pixels, int groups, float* out) {
+    std::vector<float> v(static_cast<std::size_t>(groups));
+    for (std::size_t i = 0; i < pixels * 3; ++i) {
+        group_means(buf, i, groups, v.data());
+        out[i] = finite_median(v.data(), groups);
+    }
+}
+
+inline void gmon(const buffer_list& buf, std::size_t pixels, int groups, double threshold, float* out) {
+    std::vector<float> means(static_cast<std::size_t>(groups) * 3), scratch(means.size());
+    for (std::size_t p = 0; p < pixels; ++p) {
+        double g = 0;
+        for (int c = 0; c < 3; ++c) {
+            group_means(buf, p * 3 + c, groups, &means[static_cast<std::size_t>(c) * groups]);
+            std::copy_n(&means[static_cast<std::size_t>(c) * groups], groups, scratch.begin());
+            g += gini(scratch.data(), groups) / 3.0;
+        }
+        for (int c = 0; c < 3; ++c) {
+            float* m = &means[static_cast<std::size_t>(c) * groups];
+            out[p * 3 + c] = g < threshold ? finite_mean(m, groups) : finite_median(m, groups);
+        }
+    }
 }
 
 }  // namespace firefly_peers
