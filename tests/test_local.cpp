@@ -240,6 +240,26 @@ TEST_CASE("local test: false alarms on frames without fireflies keep the promise
         }
 }
 
+TEST_CASE("local test: an understated variance breaks the promise (the check can fail)", "[local]") {
+    // The same kind of frame, but the variance given is a quarter of the variance of the mean:
+    // the statistic is then twice too large, and the share flagged far exceeds q.
+    frame_spec spec;
+    spec.w = spec.h = 96;
+    spec.spp = 16;
+    spec.shape = 4.0;
+    const test_frame f = make_frame(spec);
+    local_test_options o;
+    o.false_alarm = 1e-4;
+    const local_test_result honest = run(f, o);
+    o.variance_scale = 0.25;
+    const local_test_result under = run(f, o);
+    const double mu = o.false_alarm * 2.0 * static_cast<double>(under.tested);
+    const std::size_t n_honest = honest.half[0].index.size() + honest.half[1].index.size();
+    const std::size_t n_under = under.half[0].index.size() + under.half[1].index.size();
+    CHECK(n_honest < poisson_upper(mu, 1e-3));
+    CHECK(n_under > 10 * poisson_upper(mu, 1e-3));
+}
+
 TEST_CASE("local test: recall on moderate fireflies in a dark noisy frame", "[local]") {
     frame_spec s;
     s.w = s.h = 128;
@@ -415,14 +435,21 @@ TEST_CASE("local test: edges", "[local]") {
         const flat_frame z(16, 16, 0.5f, 0.0f);  // zero variance everywhere
         CHECK(z.run().half[0].index.empty());
     }
-    SECTION("1x1 and 2x2: too few neighbours to test, no flags") {
-        for (int n : {1, 2}) {
-            flat_frame f(n, n, 0.5f, 0.01f);
-            f.set(0, 0, 0, 500.0f, 1e4f);
-            const local_test_result r = f.run();
-            CHECK(r.half[0].index.empty());
-            CHECK(r.half[1].index.empty());
-        }
+    SECTION("1x1: nothing to pool, not flagged; 2x2: the corners are tested") {
+        flat_frame one(1, 1, 0.5f, 0.01f);
+        one.set(0, 0, 0, 500.0f, 1e4f);
+        const local_test_result r1 = one.run();
+        CHECK(r1.half[0].index.empty());
+        CHECK(r1.half[1].index.empty());
+        flat_frame two(2, 2, 0.5f, 0.01f);
+        two.set(0, 1, 0, 500.0f, 1e4f);
+        const local_test_result r2 = two.run();
+        CHECK(r2.tested == 4);
+        CHECK(r2.half[0].index == std::vector<std::uint32_t>{1u});
+        CHECK(r2.half[1].index.empty());
+        local_test_options o;
+        o.min_neighbours = 7;  // a corner has 6
+        CHECK(two.run(o).half[0].index.empty());
     }
     SECTION("a 1e30 firefly next to 1e-3 pixels") {
         flat_frame f(7, 7, 1e-3f, 0.01f);

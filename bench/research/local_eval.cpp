@@ -3,8 +3,12 @@
 // reconstruction for every detector so the detectors are compared, not the rebuilds:
 //   a pixel flagged in one half takes the other half's value; a pixel flagged in both halves
 //   takes the mean of (A + B) / 2 over its unflagged 3x3 neighbours (unchanged if none).
-// Rows: the global stage alone (detector::detect's firefly mask), the local stage alone, and
-// their union; "worse" is the share of changed pixels whose error against the reference grew.
+// Rows: the global stage alone (detector::detect's firefly mask); then, at false-alarm
+// levels q = 1e-4 (the default), 1e-3, 1e-2, 0.05: the local stage alone, the union of both,
+// and "confirm" (a one-half global outlier is rebuilt only when the local test also flags it;
+// both-half outliers the highlight check does not keep are rebuilt as before). "worse" is the
+// share of changed pixels whose error against the reference grew; recall and FP (share of
+// clean pixel-halves flagged) where the simulator gives the truth.
 //
 // Build: g++ -std=c++17 -O2 -Iinclude bench/research/local_eval.cpp -o local_eval
 // Run:   ./local_eval [path to ../shared/data]
@@ -141,17 +145,19 @@ row evaluate(const frame_data& d, const std::vector<std::uint8_t> (&flag)[2]) {
 }
 
 void print(const char* scene, const char* what, const row& r, double ms) {
-    std::printf("%-16s %-8s relMSE %8.4f  changed %6.4f  worse %5.3f  flagged %7.5f", scene, what, r.relmse,
+    std::printf("%-16s %-14s relMSE %8.4f  changed %6.4f  worse %5.3f  flagged %7.5f", scene, what, r.relmse,
                 r.changed, r.worse, r.flagged);
     if (r.recall >= 0) std::printf("  recall %5.3f  FP %8.6f", r.recall, r.fp);
     std::printf("  %.2f ms\n", ms);
 }
 
-void run(const char* name, const frame_data& d) {
-    using clock = std::chrono::steady_clock;
+using flags = std::vector<std::uint8_t>;
+
+// The global stage's firefly mask per half, and its time (best of 5, scratch warm).
+double global_flags(const frame_data& d, flags (&out)[2]) {
     const std::size_t n = static_cast<std::size_t>(d.w) * d.h;
     firefly::half_buffer<const float> hb[2];
-    std::vector<std::uint8_t> mask[2], global[2], local[2], both[2];
+    flags mask[2];
     for (int i = 0; i < 2; ++i) {
         hb[i].color = *firefly::make_image_view(d.color[i].data(), d.w, d.h, 3);
         hb[i].variance = *firefly::make_image_view(d.variance[i].data(), d.w, d.h, 3);
@@ -159,45 +165,75 @@ void run(const char* name, const frame_data& d) {
         mask[i].assign(n, 0);
     }
     firefly::detector det;
-    auto m0 = *firefly::make_image_view(mask[0].data(), d.w, d.h, 1);
-    auto m1 = *firefly::make_image_view(mask[1].data(), d.w, d.h, 1);
-    // Times: the best of 5 runs (scratch memory warm, as in a renderer's frame loop).
-    firefly::frame_report rep;
-    double global_ms = 1e30, local_ms = 1e30;
+    const auto m0 = *firefly::make_image_view(mask[0].data(), d.w, d.h, 1);
+    const auto m1 = *firefly::make_image_view(mask[1].data(), d.w, d.h, 1);
+    double ms = 1e30;
     for (int k = 0; k < 5; ++k) {
-        const auto t0 = clock::now();
-        rep = det.detect(hb[0], hb[1], m0, m1);
-        global_ms = std::min(global_ms, std::chrono::duration<double, std::milli>(clock::now() - t0).count());
+        const auto t0 = std::chrono::steady_clock::now();
+        const firefly::frame_report rep = det.detect(hb[0], hb[1], m0, m1);
+        ms = std::min(ms, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+        if (!rep.error.ok()) std::printf("detector: %s\n", rep.error.message());
     }
-    if (!rep.error.ok()) std::printf("%s: detector: %s\n", name, rep.error.message());
+    for (int i = 0; i < 2; ++i) {
+        out[i].assign(n, 0);
+        for (std::size_t j = 0; j < n; ++j) out[i][j] = (mask[i][j] & firefly::mask_bits::firefly) != 0;
+    }
+    return ms;
+}
+
+// The local test's flags per half at false-alarm level q, and its time (best of 5).
+double local_flags(const frame_data& d, double q, flags (&out)[2]) {
+    const std::size_t n = static_cast<std::size_t>(d.w) * d.h;
     firefly::local_half<float> lh[2];
     for (int i = 0; i < 2; ++i) {
-        lh[i].color = hb[i].color;
-        lh[i].variance = hb[i].variance;
-        lh[i].alpha = hb[i].alpha;
+        lh[i].color = *firefly::make_image_view(d.color[i].data(), d.w, d.h, 3);
+        lh[i].variance = *firefly::make_image_view(d.variance[i].data(), d.w, d.h, 3);
+        if (!d.alpha.empty()) lh[i].alpha = *firefly::make_image_view(d.alpha.data(), d.w, d.h, 1);
     }
+    firefly::local_test_options o;
+    o.false_alarm = q;
     firefly::local_test_scratch scratch;
-    firefly::local_test_result lr;
-    firefly::status st;
+    firefly::local_test_result r;
+    double ms = 1e30;
     for (int k = 0; k < 5; ++k) {
-        const auto t0 = clock::now();
-        st = firefly::local_test(lh[0], lh[1], firefly::local_test_options{}, scratch, lr);
-        local_ms = std::min(local_ms, std::chrono::duration<double, std::milli>(clock::now() - t0).count());
+        const auto t0 = std::chrono::steady_clock::now();
+        const firefly::status st = firefly::local_test(lh[0], lh[1], o, scratch, r);
+        ms = std::min(ms, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+        if (!st.ok()) std::printf("local: %s\n", st.message());
     }
-    if (!st.ok()) std::printf("%s: local: %s\n", name, st.message());
     for (int i = 0; i < 2; ++i) {
-        global[i].assign(n, 0);
-        local[i].assign(n, 0);
-        for (std::size_t j = 0; j < n; ++j) global[i][j] = (mask[i][j] & firefly::mask_bits::firefly) != 0;
-        for (const std::uint32_t j : lr.half[i].index) local[i][j] = 1;
-        both[i] = global[i];
-        for (std::size_t j = 0; j < n; ++j) both[i][j] |= local[i][j];
+        out[i].assign(n, 0);
+        for (const std::uint32_t j : r.half[i].index) out[i][j] = 1;
     }
-    std::vector<std::uint8_t> none[2] = {std::vector<std::uint8_t>(n, 0), std::vector<std::uint8_t>(n, 0)};
+    return ms;
+}
+
+void run(const char* name, const frame_data& d, bool sweep) {
+    const std::size_t n = static_cast<std::size_t>(d.w) * d.h;
+    flags global[2], none[2] = {flags(n, 0), flags(n, 0)};
+    const double global_ms = global_flags(d, global);
     print(name, "input", evaluate(d, none), 0);
     print(name, "global", evaluate(d, global), global_ms);
-    print(name, "local", evaluate(d, local), local_ms);
-    print(name, "union", evaluate(d, both), global_ms + local_ms);
+    for (const double q : {1e-4, 1e-3, 1e-2, 5e-2}) {
+        if (!sweep && q != 1e-4) break;
+        flags local[2], uni[2], confirm[2];
+        const double local_ms = local_flags(d, q, local);
+        for (int i = 0; i < 2; ++i) {
+            uni[i] = confirm[i] = local[i];
+            for (std::size_t j = 0; j < n; ++j) {
+                const bool both = global[0][j] && global[1][j];
+                uni[i][j] = global[i][j] || local[i][j];
+                confirm[i][j] = both || (global[i][j] && local[i][j]);
+            }
+        }
+        char label[3][32];
+        std::snprintf(label[0], 32, "local %g", q);
+        std::snprintf(label[1], 32, "union %g", q);
+        std::snprintf(label[2], 32, "confirm %g", q);
+        print(name, label[0], evaluate(d, local), local_ms);
+        print(name, label[1], evaluate(d, uni), global_ms + local_ms);
+        print(name, label[2], evaluate(d, confirm), global_ms + local_ms);
+    }
 }
 
 }  // namespace
@@ -217,10 +253,10 @@ int main(int argc, char** argv) {
             std::printf("%s: cannot read\n", name);
             continue;
         }
-        run(name, d);
+        run(name, d, true);
     }
     for (const char* name : {"decades", "interior", "fog", "sparse_fireflies", "dense_fireflies", "highlights",
                              "fine_detail", "black_alpha", "production", "null_k1_spp4", "null_k1_spp16",
                              "null_k4_spp64", "null_k16_spp1024"})
-        run(name, from_sim(firefly::sim::simulate(firefly::sim::named_scene(name, 256, 256, 1))));
+        run(name, from_sim(firefly::sim::simulate(firefly::sim::named_scene(name, 256, 256, 1))), true);
 }
