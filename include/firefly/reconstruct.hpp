@@ -19,7 +19,9 @@
 //            neither scan order nor thread count. Capped at max_iterations.
 //
 // A marked pixel that no source can reach (its whole neighbourhood, transitively, is marked
-// or excluded) keeps its values and is reported (unreachable, no_valid_pixels).
+// or excluded: a firefly inside a kept highlight region) reads the excluded pixels after
+// all; one that nothing can reach keeps its values and is reported (unreachable,
+// no_valid_pixels).
 //
 // Exact symmetry: the weighted sums are kernel.hpp's flip-exact trees, so a flipped or
 // transposed input gives a bit-identical (flipped) output.
@@ -130,6 +132,22 @@ inline void queue_neighbours(std::size_t p, int w, int h, int r, std::uint8_t wa
             s.state_[q] = static_cast<std::uint8_t>(want | reconstruct_scratch::queued);
             s.next_.push_back(static_cast<std::uint32_t>(q));
         }
+}
+
+// After phase 1 left pixels pending: excluded pixels become sources (state 0), and list_
+// gets the pending pixels that now have one within the kernel. False when there are none.
+inline bool fallback_to_excluded(reconstruct_scratch& s, int w, int h, int r) {
+    s.next_.clear();
+    for (std::size_t p = 0; p < s.state_.size(); ++p)
+        if (s.state_[p] == 3) {
+            s.state_[p] = 0;
+            queue_neighbours(p, w, h, r, 1, s);
+        }
+    std::sort(s.next_.begin(), s.next_.end());
+    s.list_.swap(s.next_);
+    s.next_.clear();
+    for (const std::uint32_t q : s.list_) s.state_[q] &= static_cast<std::uint8_t>(~reconstruct_scratch::queued);
+    return !s.list_.empty();
 }
 
 // Moves next_ into list_ (sorted: memory order) and clears the queued flags.
@@ -262,6 +280,22 @@ reconstruct_report reconstruct(const image_view<C>& color, const image_view<V>& 
         pending -= kept;
         for (const std::uint32_t p : s.list_) detail::queue_neighbours(p, w, h, r, 1, s);
         detail::advance(s);
+    }
+    if (pending > 0 && detail::fallback_to_excluded(s, w, h, r)) {
+        // Pixels no source can reach (a firefly inside a kept highlight region, say) may
+        // read the excluded pixels after all, rather than stay as they are.
+        while (!s.list_.empty()) {
+            s.staged_.resize(s.list_.size() * static_cast<std::size_t>(nch));
+            for (std::size_t e = 0; e < s.list_.size(); ++e) (void)filter_any(e);  // all succeed
+            ++rep.phase1_rounds;
+            for (std::size_t e = 0; e < s.list_.size(); ++e) {
+                (void)commit(e);
+                s.state_[s.list_[e]] = 2;
+            }
+            pending -= s.list_.size();
+            for (const std::uint32_t p : s.list_) detail::queue_neighbours(p, w, h, r, 1, s);
+            detail::advance(s);
+        }
     }
     if (pending > 0) {
         rep.unreachable = pending;
