@@ -44,16 +44,17 @@ namespace {
 struct scene_data {
     std::string name;
     int w = 0, h = 0;
-    std::vector<float> color[2], variance[2], alpha;
+    sim::frame f;                             // halves, alpha, reference (f.expected); for a
+                                              // simulated scene also the ground truth
     std::vector<std::vector<float>> buffers;  // K x RGB; empty: the halves
-    std::vector<float> reference;             // RGB
     std::vector<float> input;                 // (A + B) / 2 as given
-    const sim::frame* truth = nullptr;
+    const sim::frame* truth = nullptr;        // &f when simulated
     std::size_t pixels() const { return static_cast<std::size_t>(w) * static_cast<std::size_t>(h); }
+    const std::vector<float>& reference() const { return f.expected; }
     firefly_peers::buffer_list buffer_list() const {
         firefly_peers::buffer_list b;
         if (buffers.empty())
-            for (const auto& c : color) b.push_back(c.data());
+            for (const auto& c : f.color) b.push_back(c.data());
         for (const auto& c : buffers) b.push_back(c.data());
         return b;
     }
@@ -204,13 +205,13 @@ void brightness_cuts(const std::vector<float>& ref, double& dark, double& bright
 void count_metrics(benchmark::State& st, const scene_data& s, const std::vector<float>& out) {
     const std::size_t np = s.pixels();
     double dark_cut, bright_cut;
-    brightness_cuts(s.reference, dark_cut, bright_cut);
+    brightness_cuts(s.reference(), dark_cut, bright_cut);
     std::size_t changed = 0, worse = 0;
     double sum_out[3] = {0, 0, 0}, sum_ref[3] = {0, 0, 0};  // all, dark, bright
     for (std::size_t p = 0; p < np; ++p) {
         const float* o = &out[p * 3];
         const float* in = &s.input[p * 3];
-        const float* r = &s.reference[p * 3];
+        const float* r = &s.reference()[p * 3];
         if (pixel_changed(o, in)) {
             ++changed;
             worse += pixel_error(o, r) > pixel_error(in, r);
@@ -224,7 +225,7 @@ void count_metrics(benchmark::State& st, const scene_data& s, const std::vector<
                 sum_ref[k] += lr;
             }
     }
-    st.counters["relmse"] = sim::relmse(out.data(), s.reference.data(), np);
+    st.counters["relmse"] = sim::relmse(out.data(), s.reference().data(), np);
     st.counters["changed"] = static_cast<double>(changed) / static_cast<double>(np);
     st.counters["worse"] = static_cast<double>(worse) / static_cast<double>(np);
     st.counters["worse_of_changed"] = changed ? static_cast<double>(worse) / static_cast<double>(changed) : 0.0;
@@ -291,11 +292,11 @@ struct work {
     half_buffer<float> half[2];
     void load(const scene_data& s) {
         for (int i = 0; i < 2; ++i) {
-            col[i] = s.color[i];
-            var[i] = s.variance[i];
+            col[i] = s.f.color[i];
+            var[i] = s.f.variance[i];
             half[i].color = *make_image_view(col[i].data(), s.w, s.h, 3);
             half[i].variance = *make_image_view(var[i].data(), s.w, s.h, 3);
-            if (!s.alpha.empty()) half[i].alpha = *make_image_view(s.alpha.data(), s.w, s.h, 1);
+            if (!s.f.alpha.empty()) half[i].alpha = *make_image_view(s.f.alpha.data(), s.w, s.h, 1);
         }
     }
 };
@@ -334,7 +335,7 @@ void run_buffers(benchmark::State& st, const scene_data* s, const config& cfg) {
     count_metrics(st, *s, out);
     // Halves for the ground-truth counters: a pixel the estimator left at the input's value
     // is unchanged in both halves; any other takes the output in both.
-    std::vector<float> h[2] = {s->color[0], s->color[1]};
+    std::vector<float> h[2] = {s->f.color[0], s->f.color[1]};
     for (std::size_t p = 0; p < s->pixels(); ++p)
         if (pixel_changed(&out[p * 3], &s->input[p * 3]))
             for (int i = 0; i < 2; ++i) std::copy_n(&out[p * 3], 3, &h[i][p * 3]);
@@ -351,17 +352,19 @@ void register_scene(const scene_data* s, int iterations) {
                            : benchmark::RegisterBenchmark(name.c_str(), run_buffers, s, c);
         b->Unit(benchmark::kMillisecond)->Iterations(iterations);
     }
-    write_image(*s, "reference", s->reference);
+    write_image(*s, "reference", s->reference());
 }
 
 // ---------------------------------------------------------------------------------------
 // Scenes.
 
 void finish(scene_data& s) {
-    s.input = combine(s.color[0], s.color[1]);
+    s.w = s.f.width;
+    s.h = s.f.height;
+    s.input = combine(s.f.color[0], s.f.color[1]);
 }
 
-void add_simulated(std::map<std::string, scene_data>& all, std::map<std::string, sim::frame>& frames, int w, int h) {
+void add_simulated(std::map<std::string, scene_data>& all, int w, int h) {
     std::vector<std::string> names = sim::scene_names();
     names.push_back("highlights@16spp");  // hard: few samples make real highlights noisy
     names.push_back("production@16spp");
@@ -369,18 +372,10 @@ void add_simulated(std::map<std::string, scene_data>& all, std::map<std::string,
         const std::size_t at = name.find('@');
         sim::scene sc = sim::named_scene(name.substr(0, at), w, h, 1);
         if (at != std::string::npos) sc.spp = std::atoi(name.c_str() + at + 1);
-        const sim::frame& f = frames[name] = sim::simulate(sc);
         scene_data& s = all[name];
         s.name = name;
-        s.w = f.width;
-        s.h = f.height;
-        for (int i = 0; i < 2; ++i) {
-            s.color[i] = f.color[i];
-            s.variance[i] = f.variance[i];
-        }
-        s.alpha = f.alpha;
-        s.reference = f.expected;
-        s.truth = &f;
+        s.f = sim::simulate(sc);
+        s.truth = &s.f;
         finish(s);
     }
 }
@@ -406,33 +401,25 @@ void buffer_half(const sim::buffers& b, int h, sim::frame& f) {
 
 // Simulated scenes with K buffers (name@kK): the K-buffer estimators read the K buffers, the
 // half-buffer methods their two halves (K/2 buffers each), the same samples.
-void add_buffer_scenes(std::map<std::string, scene_data>& all, std::map<std::string, sim::frame>& frames, int w, int h) {
+void add_buffer_scenes(std::map<std::string, scene_data>& all, int w, int h) {
     for (const char* base : {"sparse_fireflies", "highlights", "production", "caustics", "interior", "null_k4_spp64"})
         for (int k : {4, 8}) {
             const std::string name = std::string(base) + "@k" + std::to_string(k);
             sim::buffers b = sim::simulate_buffers(sim::named_scene(base, w, h, 1), k);
-            sim::frame& f = frames[name];
+            scene_data& s = all[name];
+            s.name = name;
+            sim::frame& f = s.f;
             f.width = b.width;
             f.height = b.height;
             f.effects = b.effects;
             buffer_half(b, 0, f);
             buffer_half(b, 1, f);
-            f.alpha = b.alpha;
-            f.expected = b.expected;
-            f.highlight = b.highlight;
-            f.touched = b.touched;
-            scene_data& s = all[name];
-            s.name = name;
-            s.w = f.width;
-            s.h = f.height;
-            s.color[0] = f.color[0];
-            s.color[1] = f.color[1];
-            s.variance[0] = f.variance[0];
-            s.variance[1] = f.variance[1];
-            s.alpha = f.alpha;
+            f.alpha = std::move(b.alpha);
+            f.expected = std::move(b.expected);
+            f.highlight = std::move(b.highlight);
+            f.touched = std::move(b.touched);
             s.buffers = std::move(b.color);
-            s.reference = f.expected;
-            s.truth = &f;
+            s.truth = &s.f;
             finish(s);
         }
 }
@@ -452,13 +439,13 @@ bool load_halves_render(scene_data& s, const char* scene) {
         }
     }
     s.name = scene;
-    s.w = img[0].width;
-    s.h = img[0].height;
-    s.color[0] = img[0].pixels;
-    s.variance[0] = img[1].pixels;
-    s.color[1] = img[2].pixels;
-    s.variance[1] = img[3].pixels;
-    s.reference = img[4].pixels;
+    s.f.width = img[0].width;
+    s.f.height = img[0].height;
+    s.f.color[0] = std::move(img[0].pixels);
+    s.f.variance[0] = std::move(img[1].pixels);
+    s.f.color[1] = std::move(img[2].pixels);
+    s.f.variance[1] = std::move(img[3].pixels);
+    s.f.expected = std::move(img[4].pixels);
     finish(s);
     return true;
 }
@@ -466,17 +453,17 @@ bool load_halves_render(scene_data& s, const char* scene) {
 // Half h of K seed renders: the mean of its K/2 renders, and the variance of that mean from
 // their spread (sample variance / (K/2)).
 void seed_half(scene_data& s, int h) {
-    const std::size_t n = s.pixels() * 3;
+    const std::size_t n = static_cast<std::size_t>(s.f.width) * s.f.height * 3;
     const int per = static_cast<int>(s.buffers.size()) / 2;
-    s.color[h].assign(n, 0.0f);
-    s.variance[h].assign(n, 0.0f);
+    s.f.color[h].assign(n, 0.0f);
+    s.f.variance[h].assign(n, 0.0f);
     for (std::size_t i = 0; i < n; ++i) {
         double sum = 0, sum2 = 0;
         for (int j = h * per; j < (h + 1) * per; ++j) sum += s.buffers[j][i];
         const double m = sum / per;
         for (int j = h * per; j < (h + 1) * per; ++j) sum2 += (s.buffers[j][i] - m) * (s.buffers[j][i] - m);
-        s.color[h][i] = static_cast<float>(m);
-        s.variance[h][i] = static_cast<float>(sum2 / (per - 1) / per);
+        s.f.color[h][i] = static_cast<float>(m);
+        s.f.variance[h][i] = static_cast<float>(sum2 / (per - 1) / per);
     }
 }
 
@@ -495,9 +482,9 @@ bool load_seed_renders(scene_data& s) {
         return false;
     }
     s.name = "cycles-caustics-seeds";
-    s.w = ref.width;
-    s.h = ref.height;
-    s.reference = ref.pixels;
+    s.f.width = ref.width;
+    s.f.height = ref.height;
+    s.f.expected = std::move(ref.pixels);
     seed_half(s, 0);
     seed_half(s, 1);
     finish(s);
@@ -508,10 +495,9 @@ int register_all() {
     int w = 2048, h = 1080;
     if (const char* s = std::getenv("FIREFLY_ACCURACY_SIZE")) std::sscanf(s, "%dx%d", &w, &h);
     benchmark::AddCustomContext("simulated_frame", std::to_string(w) + "x" + std::to_string(h));
-    static std::map<std::string, sim::frame> frames;
     static std::map<std::string, scene_data> scenes;
-    add_simulated(scenes, frames, w, h);
-    add_buffer_scenes(scenes, frames, w, h);
+    add_simulated(scenes, w, h);
+    add_buffer_scenes(scenes, w, h);
     for (auto& [name, s] : scenes) register_scene(&s, 2);
     static scene_data real[3];
     if (load_halves_render(real[0], "cycles-caustics")) register_scene(&real[0], 3);
