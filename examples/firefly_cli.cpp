@@ -17,7 +17,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -198,8 +197,9 @@ std::string views_of(half_data& h, half_buffer<float>& hb) {
     return {};
 }
 
-// Combined image: (A + B) / 2, variance of the mean vA / 4 + vB / 4 (in double, held at
-// FLT_MAX: FLT_MAX inputs must not become Inf), alpha averaged.
+// Combined image: (A + B) / 2, variance of the mean vA / 4 + vB / 4, alpha averaged. The
+// variance sum is taken in double: for finite inputs it is at most FLT_MAX / 2, so FLT_MAX
+// variances stay finite (0.25f * (a + b) in float overflowed to Inf); Inf and NaN pass as is.
 image combine(const half_data (&h)[2]) {
     image comb;
     comb.width = h[0].img.width;
@@ -210,16 +210,12 @@ image combine(const half_data (&h)[2]) {
     const std::size_t stride = comb.channels.size(), nv = static_cast<std::size_t>(h[0].nv);
     const std::size_t np = static_cast<std::size_t>(comb.width) * static_cast<std::size_t>(comb.height);
     comb.pixels.resize(np * stride);
-    const double fmax = std::numeric_limits<float>::max();
     for (std::size_t i = 0; i < np; ++i) {
         const float* a = &h[0].img.pixels[i * stride];
         const float* b = &h[1].img.pixels[i * stride];
         float* o = &comb.pixels[i * stride];
         for (std::size_t k = 0; k < 3; ++k) o[k] = 0.5f * a[k] + 0.5f * b[k];
-        for (std::size_t k = 3; k < 3 + nv; ++k) {
-            const double v = 0.25 * a[k] + 0.25 * b[k];
-            o[k] = static_cast<float>(v > fmax ? fmax : v < -fmax ? -fmax : v);
-        }
+        for (std::size_t k = 3; k < 3 + nv; ++k) o[k] = static_cast<float>(0.25 * a[k] + 0.25 * b[k]);
         if (h[0].has_alpha) o[3 + nv] = 0.5f * a[3 + nv] + 0.5f * b[3 + nv];
     }
     return comb;

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <new>
 #include <string>
@@ -66,12 +67,12 @@ inline bool have_png() {
 }
 
 #ifdef FIREFLY_HAVE_OPENEXR
-// Float samples a file of `file_bytes` may claim: the pixel limit, and no more than 4096
-// floats per byte of file (zlib inflates at most ~1032:1; half data doubles on reading as
-// float) plus 64 MiB, so a tiny file cannot claim gigabytes.
+// Bytes of float samples a file of `file_bytes` may claim: within the pixel limit, and no
+// more than 1 MiB plus 4096 per byte of file (zlib inflates at most ~1032:1, and half data
+// doubles when read as float), so a tiny file cannot claim gigabytes.
 inline bool exr_size_plausible(std::uint64_t pixels, std::uint64_t channels, std::uint64_t file_bytes) {
     if (pixels > max_pixels) return false;
-    return pixels * channels * 4 <= (std::uint64_t{64} << 20) + file_bytes * 4096;
+    return pixels * channels * 4 <= (std::uint64_t{1} << 20) + file_bytes * 4096;
 }
 
 inline std::string exr_channels_missing(const Imf::Header& header, const std::vector<std::string>& names) {
@@ -85,28 +86,117 @@ inline std::string exr_channels_missing(const Imf::Header& header, const std::ve
     return "missing channel(s) " + missing + " (the file has: " + have + ")";
 }
 
+// True when a chlist value (entries of name, NUL, 16 bytes; then a NUL) fills exactly `v`:
+// OpenEXR 3.1 parses it without looking at the attribute's size.
+inline bool exr_chlist_fits(const std::vector<char>& v) {
+    std::size_t p = 0;
+    while (p < v.size()) {
+        if (v[p] == 0) return p + 1 == v.size();
+        const void* nul = std::memchr(v.data() + p, 0, std::min<std::size_t>(v.size() - p, 256));
+        if (!nul) return false;
+        p = static_cast<std::size_t>(static_cast<const char*>(nul) - v.data()) + 1 + 16;
+    }
+    return false;
+}
+
+inline std::uint32_t exr_u32(const char* b) {
+    const auto* u = reinterpret_cast<const unsigned char*>(b);
+    return u[0] | (u[1] << 8) | (u[2] << 16) | (std::uint32_t{u[3]} << 24);
+}
+
+// Walks the attribute list of every header (name, type, 32-bit size, value) and checks each
+// claimed size against the bytes left, and the values OpenEXR 3.1 parses by their content
+// (channel lists, previews) against their sizes, so that OpenEXR never allocates for a
+// value the stream cannot hold. Leaves the stream after the headers.
+inline bool exr_attribute_sizes_fit(Imf::IStream& in, std::uint64_t stream_bytes, int version) {
+    const bool multipart = (version & 0x1000) != 0;
+    auto read_name = [&](std::string& out) {
+        out.clear();
+        char ch = 0;
+        for (int i = 0; i < 256; ++i) {
+            if (in.tellg() >= stream_bytes) return false;
+            in.read(&ch, 1);
+            if (ch == 0) return true;
+            out += ch;
+        }
+        return false;
+    };
+    std::string name, type;
+    std::vector<char> value;
+    for (int header = 0;; ++header) {
+        for (int attr = 0;; ++attr) {
+            if (!read_name(name)) return false;
+            if (name.empty()) {
+                if (attr == 0 && header > 0) return true;  // the empty header ending a multi-part list
+                break;
+            }
+            char b[8];
+            if (!read_name(type) || stream_bytes - in.tellg() < 4) return false;
+            in.read(b, 4);
+            const std::uint32_t size = exr_u32(b);
+            if (size > 0x7fffffffu || size > stream_bytes - in.tellg()) return false;
+            if (type == "chlist") {
+                value.resize(size);
+                if (size > 0) in.read(value.data(), static_cast<int>(size));
+                if (!exr_chlist_fits(value)) return false;
+            } else if (type == "preview") {  // width, height, then width x height RGBA bytes
+                if (size < 8) return false;
+                in.read(b, 8);
+                if (std::uint64_t{exr_u32(b)} * exr_u32(b + 4) * 4 + 8 != size) return false;
+                in.seekg(in.tellg() + size - 8);
+            } else {
+                in.seekg(in.tellg() + size);
+            }
+        }
+        if (!multipart) return true;
+    }
+}
+
+// Reads the header only and checks what it claims before OpenEXR allocates for the image:
+// attribute sizes, the data window (each side at most 2^16) and the bytes of float samples.
+inline std::string exr_header_check(Imf::IStream& in, std::uint64_t stream_bytes, std::size_t channels_wanted) {
+    char head[8] = {0};
+    if (stream_bytes < 8) return "is not an OpenEXR file";
+    in.read(head, 8);
+    if (head[0] != 0x76 || head[1] != 0x2f || head[2] != 0x31 || head[3] != 0x01) return "is not an OpenEXR file";
+    int version = 0;
+    std::memcpy(&version, head + 4, 4);
+    if (!exr_attribute_sizes_fit(in, stream_bytes, version)) return "has a header attribute larger than the file";
+    const std::uint64_t end = in.tellg();
+    in.seekg(8);
+    Imf::Header probe;
+    probe.readFrom(in, version);
+    if (!(version & 0x1000) && in.tellg() != end) return "has a header OpenEXR reads differently from its sizes";
+    const Imath::Box2i dw = probe.dataWindow();
+    const std::int64_t w = std::int64_t{dw.max.x} - dw.min.x + 1, h = std::int64_t{dw.max.y} - dw.min.y + 1;
+    if (w <= 0 || h <= 0 || w > max_side || h > max_side) return "has a bad data window";
+    std::size_t in_file = 0;
+    for (auto it = probe.channels().begin(); it != probe.channels().end(); ++it) ++in_file;
+    if (!exr_size_plausible(static_cast<std::uint64_t>(w * h), std::max(in_file, channels_wanted), stream_bytes))
+        return "has a data window too large for the file (or beyond the 2^27-pixel limit)";
+    in.seekg(0);
+    return {};
+}
+
 // Reads the named channels (in that order) from an EXR stream of `stream_bytes` bytes; the
 // function the file reader and the fuzz target share. `name` labels the messages.
 inline std::string read_exr(Imf::IStream& in, std::uint64_t stream_bytes, const std::string& name,
                             const std::vector<std::string>& names, image& out) {
     try {
-        char magic[4] = {0, 0, 0, 0};
-        if (stream_bytes < 8 || !in.read(magic, 4) || magic[0] != 0x76 || magic[1] != 0x2f || magic[2] != 0x31 ||
-            magic[3] != 0x01)
-            return name + " is not an OpenEXR file";
-        in.seekg(0);
-        // Header sanity checks refuse huge windows before OpenEXR allocates for them.
+        const std::string bad = exr_header_check(in, stream_bytes, names.size());
+        if (!bad.empty()) return name + (bad[0] == 'i' ? " " : ": ") + bad;
+        // OpenEXR's own header checks also refuse huge windows and tiles.
         Imf::Header::setMaxImageSize(max_side, max_side);
         Imf::Header::setMaxTileSize(max_side, max_side);
         Imf::InputFile file(in);
         const Imath::Box2i dw = file.header().dataWindow();
         const std::int64_t w = std::int64_t{dw.max.x} - dw.min.x + 1, h = std::int64_t{dw.max.y} - dw.min.y + 1;
-        if (w <= 0 || h <= 0 || w > max_side || h > max_side) return name + ": bad data window";
+        const std::size_t nc = names.size();
+        if (w <= 0 || h <= 0 || w > max_side || h > max_side ||
+            !exr_size_plausible(static_cast<std::uint64_t>(w * h), nc, stream_bytes))
+            return name + ": bad data window";
         const std::string missing = exr_channels_missing(file.header(), names);
         if (!missing.empty()) return name + ": " + missing;
-        const std::size_t nc = names.size();
-        if (!exr_size_plausible(static_cast<std::uint64_t>(w * h), nc, stream_bytes))
-            return name + ": the data window is too large for the file (or beyond the 2^27-pixel limit)";
         out.width = static_cast<int>(w);
         out.height = static_cast<int>(h);
         out.channels = names;

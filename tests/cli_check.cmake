@@ -329,3 +329,10 @@ expect_fail(significance_nan "significance" ${O} ${A} ${B} -o ${O} --significanc
 expect_fail(sigma_inf "sigma" ${O} ${A} ${B} -o ${O} --sigma inf)
 expect_fail(reduction_word "reduction" ${O} ${A} ${B} -o ${O} --reduction median)
 no_temporaries(end)
+
+# --- fuzz findings on the EXR path, kept as reproducers --------------------------------------
+file(GLOB exr_regressions "${DATA}/../fuzz/regressions/exr/*")
+foreach(f ${exr_regressions})
+  get_filename_component(n ${f} NAME)
+  expect_fail(exr_regression_${n} "" ${O} ${f} ${B} -o ${O})
+endforeach()
