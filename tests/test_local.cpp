@@ -309,6 +309,32 @@ TEST_CASE("local test: a bright noisy region without fireflies is left alone", "
     CHECK(r.half[0].index.size() + r.half[1].index.size() <= poisson_upper(2.0 * 128 * 128 * 1e-5, 1e-3));
 }
 
+TEST_CASE("local test: double colour with float variance gives the float frame's flags", "[local]") {
+    frame_spec s;
+    s.w = 40;
+    s.h = 32;
+    s.spp = 16;
+    s.ff_rate = 0.03;
+    const test_frame f = make_frame(s);
+    const local_test_result ref = run(f);
+    REQUIRE(ref.half[0].index.size() + ref.half[1].index.size() > 5);
+    std::vector<double> colour[2];
+    local_half<double, float, float> h[2];
+    for (int i = 0; i < 2; ++i) {
+        colour[i].assign(f.color[i].begin(), f.color[i].end());
+        h[i].color = *make_image_view(colour[i].data(), f.w, f.h, 3);
+        h[i].variance = *make_image_view(f.variance[i].data(), f.w, f.h, 3);
+        h[i].alpha = *make_image_view(f.alpha.data(), f.w, f.h, 1);
+    }
+    local_test_scratch scratch;
+    local_test_result r;
+    REQUIRE(local_test(h[0], h[1], local_test_options{}, scratch, r).ok());
+    for (int i = 0; i < 2; ++i) {
+        CHECK(r.half[i].index == ref.half[i].index);
+        CHECK(r.half[i].score == ref.half[i].score);
+    }
+}
+
 namespace {
 
 // The frame seen through one of the 8 flips and transposes: pixel (x, y) of the result is

@@ -127,11 +127,12 @@ struct local_test_scratch {
 // One half buffer's views for the test; alpha may be empty. label (optional, pixel_count
 // bytes, row-major): the stddev pass's labels, pixel_class in the low bits; when null the
 // class is computed here (black: every colour channel 0; alpha <= 0; NaN/Inf anywhere).
-template <class T>
+// Colour, variance and alpha may each have their own channel type, as in half_buffer.
+template <class C, class V = C, class A = C>
 struct local_half {
-    image_view<const T> color;
-    image_view<const T> variance;
-    image_view<const T> alpha{};
+    image_view<const C> color;
+    image_view<const V> variance;
+    image_view<const A> alpha{};
     const std::uint8_t* label = nullptr;
 };
 
@@ -142,15 +143,16 @@ namespace detail {
 inline constexpr double min_relative_variance = 1e-14;
 
 // Level (mean colour) and relative variance of one pixel; false when it does not count.
-template <class T>
-inline bool local_pixel(const T* pc, std::ptrdiff_t cs, const T* pv, std::ptrdiff_t vs, int nc, bool one_var,
+template <class C, class V>
+inline bool local_pixel(const C* pc, std::ptrdiff_t cs, const V* pv, std::ptrdiff_t vs, int nc, bool one_var,
                         double scale, double& level, float& rel_var) noexcept {
-    using traits = channel_traits<std::remove_cv_t<T>>;
+    using ctraits = channel_traits<std::remove_cv_t<C>>;
+    using vtraits = channel_traits<std::remove_cv_t<V>>;
     double sum = 0, sd = 0, fin = 0;
     bool black = true;
     for (int c = 0; c < nc; ++c) {
-        const double v = traits::load(pc[c * cs]);
-        const double var = traits::load(pv[one_var ? 0 : c * vs]);
+        const double v = ctraits::load(pc[c * cs]);
+        const double var = vtraits::load(pv[one_var ? 0 : c * vs]);
         fin += (v - v) + (var - var);  // NaN for any NaN or Inf
         black &= v == 0.0;
         sum += v;
@@ -170,27 +172,29 @@ inline bool local_pixel(const T* pc, std::ptrdiff_t cs, const T* pv, std::ptrdif
 }
 
 // Level and relative variance of every pixel of one half (NaN where unusable).
-template <class T>
-void local_levels(const local_half<T>& h, double scale, std::vector<double>& level, std::vector<float>& rel_var) {
+template <class C, class V, class A>
+void local_levels(const local_half<C, V, A>& h, double scale, std::vector<double>& level,
+                  std::vector<float>& rel_var) {
     const int w = h.color.width(), ht = h.color.height();
     const int nc = colour_channels(h.color.channels());
     const bool one_var = h.variance.channels() == 1;
     level.resize(h.color.pixel_count());
     rel_var.resize(h.color.pixel_count());
-    const strided<const T> col(h.color), var(h.variance);
-    const strided<const T> al(h.alpha);
-    using traits = channel_traits<std::remove_cv_t<T>>;
+    const strided<const C> col(h.color);
+    const strided<const V> var(h.variance);
+    const strided<const A> al(h.alpha);
+    using atraits = channel_traits<std::remove_cv_t<A>>;
     const auto valid = static_cast<std::uint8_t>(pixel_class::valid);
     for (int y = 0; y < ht; ++y)
         for (int x = 0; x < w; ++x) {
             const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
-            const T* pc = col.p + y * col.y + x * col.x;
-            const T* pv = var.p + y * var.y + x * var.x;
+            const C* pc = col.p + y * col.y + x * col.x;
+            const V* pv = var.p + y * var.y + x * var.x;
             bool counts = local_pixel(pc, col.c, pv, var.c, nc, one_var, scale, level[i], rel_var[i]);
             if (h.label) {
                 counts &= (h.label[i] & pixel_class_bits) == valid;
             } else if (!h.alpha.empty()) {
-                const double a = traits::load(al.p[y * al.y + x * al.x]);
+                const double a = atraits::load(al.p[y * al.y + x * al.x]);
                 counts &= a > 0 && std::isfinite(a);
             }
             if (!counts) {
@@ -295,8 +299,8 @@ inline double t_threshold(local_test_scratch& s, double q, double df) {
 
 // Runs the local test on both halves. Views must share size, channel counts as for
 // check_half_views. Returns the first problem found; result is then empty.
-template <class T>
-status local_test(const local_half<T>& a, const local_half<T>& b, const local_test_options& options,
+template <class C, class V, class A>
+status local_test(const local_half<C, V, A>& a, const local_half<C, V, A>& b, const local_test_options& options,
                   local_test_scratch& scratch, local_test_result& result) {
     for (auto& f : result.half) {
         f.index.clear();
