@@ -14,6 +14,7 @@
 #include <cstring>
 #include <fstream>
 #include <new>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -104,10 +105,36 @@ inline std::uint32_t exr_u32(const char* b) {
     return u[0] | (u[1] << 8) | (u[2] << 16) | (std::uint32_t{u[3]} << 24);
 }
 
+// True when a stringvector value (entries of a 32-bit length and that many bytes) fills `v`.
+inline bool exr_stringvector_fits(const std::vector<char>& v) {
+    std::size_t p = 0;
+    while (v.size() - p >= 4) {
+        const std::uint32_t n = exr_u32(v.data() + p);
+        p += 4;
+        if (n > v.size() - p) return false;
+        p += n;
+    }
+    return p == v.size();
+}
+
+// The value size of the attribute types OpenEXR 3.1 reads with a fixed size whatever the
+// size field says; 0 for the others (read by size, or checked by content).
+inline std::uint32_t exr_fixed_size(const std::string& type) {
+    static const std::pair<const char*, std::uint32_t> fixed[] = {
+        {"box2i", 16}, {"box2f", 16}, {"v2i", 8},  {"v2f", 8},  {"v2d", 16}, {"v3i", 12}, {"v3f", 12},
+        {"v3d", 24},   {"int", 4},    {"float", 4}, {"double", 8}, {"compression", 1}, {"lineOrder", 1},
+        {"envmap", 1}, {"deepImageState", 1}, {"m33f", 36}, {"m33d", 72}, {"m44f", 64}, {"m44d", 128},
+        {"rational", 8}, {"timecode", 8}, {"keycode", 28}, {"tiledesc", 9}, {"chromaticities", 32}};
+    for (const auto& f : fixed)
+        if (type == f.first) return f.second;
+    return 0;
+}
+
 // Walks the attribute list of every header (name, type, 32-bit size, value) and checks each
-// claimed size against the bytes left, and the values OpenEXR 3.1 parses by their content
-// (channel lists, previews) against their sizes, so that OpenEXR never allocates for a
-// value the stream cannot hold. Leaves the stream after the headers.
+// claimed size against the bytes left, fixed-size types against their size, and the values
+// OpenEXR 3.1 parses by their content (channel lists, string vectors, previews) against
+// their sizes, so that OpenEXR never allocates for a value the stream cannot hold. Leaves
+// the stream after the headers.
 inline bool exr_attribute_sizes_fit(Imf::IStream& in, std::uint64_t stream_bytes, int version) {
     const bool multipart = (version & 0x1000) != 0;
     auto read_name = [&](std::string& out) {
@@ -135,10 +162,12 @@ inline bool exr_attribute_sizes_fit(Imf::IStream& in, std::uint64_t stream_bytes
             in.read(b, 4);
             const std::uint32_t size = exr_u32(b);
             if (size > 0x7fffffffu || size > stream_bytes - in.tellg()) return false;
-            if (type == "chlist") {
+            const std::uint32_t fixed = exr_fixed_size(type);
+            if (fixed != 0 && size != fixed) return false;
+            if (type == "chlist" || type == "stringvector") {
                 value.resize(size);
                 if (size > 0) in.read(value.data(), static_cast<int>(size));
-                if (!exr_chlist_fits(value)) return false;
+                if (!(type == "chlist" ? exr_chlist_fits(value) : exr_stringvector_fits(value))) return false;
             } else if (type == "preview") {  // width, height, then width x height RGBA bytes
                 if (size < 8) return false;
                 in.read(b, 8);
