@@ -57,8 +57,9 @@ T option_from_python(const std::string& name, py::handle v) {
         return v.cast<bool>();
     } else if constexpr (std::is_integral_v<T>) {
         if (is_bool || !PyIndex_Check(v.ptr())) throw py::type_error(name + " must be an integer");
-        const long long x = py::int_(py::reinterpret_borrow<py::object>(v)).cast<long long>();
-        if (x < std::numeric_limits<T>::min() || x > std::numeric_limits<T>::max())
+        int overflow = 0;
+        const long long x = PyLong_AsLongLongAndOverflow(py::int_(py::reinterpret_borrow<py::object>(v)).ptr(), &overflow);
+        if (overflow != 0 || x < std::numeric_limits<T>::min() || x > std::numeric_limits<T>::max())
             throw py::value_error(name + " is out of range");
         return static_cast<T>(x);
     } else {
@@ -71,7 +72,8 @@ T option_from_python(const std::string& name, py::handle v) {
 template <class T>
 py::object option_to_python(const T& v) {
     if constexpr (std::is_enum_v<T>) {
-        return py::str(firefly_py::enum_name(v));
+        const char* name = firefly_py::enum_name(v);  // null: a value missing from firefly_tables.hpp
+        return name ? py::str(name) : py::str(std::to_string(static_cast<int>(v)));
     } else {
         return py::cast(v);
     }
@@ -106,11 +108,15 @@ py::dict options_to_dict(detector_options o) {
 // ---------------------------------------------------------------------------------------
 // Reports: attributes and plain Python values, from the field lists.
 
+py::str status_code(const status& s) {
+    const char* code = firefly_py::enum_name(s.code());  // null: a code missing from the table
+    return code ? py::str(code) : py::str(std::to_string(static_cast<int>(s.code())));
+}
+
 py::dict status_to_dict(const status& s) {
     py::dict d;
     d["ok"] = s.ok();
-    const char* code = firefly_py::enum_name(s.code());
-    d["code"] = code ? py::str(code) : py::str(std::to_string(static_cast<int>(s.code())));
+    d["code"] = status_code(s);
     d["message"] = s.message();
     return d;
 }
@@ -147,7 +153,7 @@ std::string half_repr(const half_report& h) {
 void bind_reports(py::module_& m) {
     py::class_<status>(m, "Status", "A library status: ok, code (a name) and message.")
         .def_property_readonly("ok", &status::ok)
-        .def_property_readonly("code", [](const status& s) { return status_to_dict(s)["code"]; })
+        .def_property_readonly("code", &status_code)
         .def_property_readonly("message", &status::message)
         .def("as_dict", &status_to_dict)
         .def("__repr__", [](const status& s) { return "Status(" + py::repr(status_to_dict(s)).cast<std::string>() + ")"; });
@@ -162,6 +168,8 @@ void bind_reports(py::module_& m) {
     frame.def_property_readonly(
         "half", [](const frame_report& r) { return py::make_tuple(r.half[0], r.half[1]); },
         "The two half reports (A, B).");
+    frame.def_property_readonly("ok", &frame_report::ok,
+                                "True when the frame was checked and every pixel that needed it was rebuilt.");
     frame.def("as_dict", &frame_to_dict, "The same fields as plain Python types (for json.dump).");
     frame.def("__repr__", [](const frame_report& r) {
         return "FrameReport(" + py::repr(frame_to_dict(r)).cast<std::string>() + ")";
@@ -185,7 +193,7 @@ int checked_extent(const char* name, py::ssize_t n) {
 }
 
 // A view of an (H, W, C) or (H, W) array of T with numpy's strides. `channels` lists the
-// accepted channel counts (a 2-D array has 1); `writable` requires a writeable array.
+// accepted channel counts (a 2-D array has 1). A non-const T needs a writeable array.
 template <class T>
 image_view<T> view_of(const char* name, const py::array& a, std::initializer_list<int> channels, const char* dtype_text) {
     using V = std::remove_const_t<T>;
@@ -207,9 +215,12 @@ image_view<T> view_of(const char* name, const py::array& a, std::initializer_lis
     // A zero stride means "packed" to create(); to numpy it means what it says (a broadcast
     // array, every pixel in one place), which a writeable view must not be.
     for (py::ssize_t k = 0; k < a.ndim(); ++k)
-        if (a.strides(k) == 0 && a.shape(k) > 1)
+        if (a.strides(k) == 0 && a.shape(k) > 1 && a.size() > 0)  // numpy gives empty arrays 0 strides
             throw py::value_error(std::string(name) + ": strides make pixels or channels overlap");
     T* data = static_cast<T*>(const_cast<void*>(a.data()));
+    // create() checks the strides' alignment; numpy can also offset the start (frombuffer).
+    if (reinterpret_cast<std::uintptr_t>(data) % alignof(T) != 0)
+        throw py::value_error(std::string(name) + ": data is not aligned for " + dtype_text);
     auto v = image_view<T>::create(data, checked_extent(name, a.shape(1)), checked_extent(name, a.shape(0)), c,
                                    a.strides(1), a.strides(0), a.ndim() == 3 ? a.strides(2) : firefly::auto_stride);
     if (!v.ok()) throw py::value_error(std::string(name) + ": " + v.error().message());
@@ -231,12 +242,14 @@ struct process_args {
     py::object a_color, a_variance, b_color, b_variance, a_alpha, b_alpha, a_mask, b_mask;
 };
 
-template <class T>
-firefly::half_buffer<T> half_of(const char* const names[3], py::handle color, py::handle variance, py::handle alpha,
-                                const char* dtype_text) {
-    firefly::half_buffer<T> h;
-    h.color = view_of<T>(names[0], as_array(names[0], color), {1, 2, 3, 4}, dtype_text);
-    h.variance = view_of<T>(names[1], as_array(names[1], variance), {1, 2, 3, 4}, dtype_text);
+// C is the channel type of colour and variance: const for detect(), which writes nothing.
+template <class C>
+auto half_of(const char* const names[3], py::handle color, py::handle variance, py::handle alpha,
+             const char* dtype_text) {
+    using T = std::remove_const_t<C>;
+    firefly::half_buffer<C, C, const T> h;
+    h.color = view_of<C>(names[0], as_array(names[0], color), {1, 2, 3, 4}, dtype_text);
+    h.variance = view_of<C>(names[1], as_array(names[1], variance), {1, 2, 3, 4}, dtype_text);
     if (!alpha.is_none()) h.alpha = view_of<const T>(names[2], as_array(names[2], alpha), {1}, dtype_text);
     return h;
 }
@@ -246,27 +259,41 @@ image_view<std::uint8_t> mask_of(const char* name, py::handle mask) {
     return view_of<std::uint8_t>(name, as_array(name, mask), {1}, "uint8");
 }
 
-template <class T>
-frame_report process_typed(py_detector& d, const process_args& p, const char* dtype_text) {
+// Refused inputs and options raise; a frame that was processed returns its report, also
+// when some pixels had no usable source (report.ok is then False, as in C++).
+frame_report checked(const frame_report& r) {
+    if (!r.ok() && r.error.code() != firefly::errc::no_valid_pixels) throw py::value_error(r.error.message());
+    return r;
+}
+
+template <class C>
+frame_report run_typed(py_detector& d, const process_args& p, const char* dtype_text) {
     static const char* const names_a[3] = {"a_color", "a_variance", "a_alpha"};
     static const char* const names_b[3] = {"b_color", "b_variance", "b_alpha"};
-    const auto a = half_of<T>(names_a, p.a_color, p.a_variance, p.a_alpha, dtype_text);
-    const auto b = half_of<T>(names_b, p.b_color, p.b_variance, p.b_alpha, dtype_text);
+    const auto a = half_of<C>(names_a, p.a_color, p.a_variance, p.a_alpha, dtype_text);
+    const auto b = half_of<C>(names_b, p.b_color, p.b_variance, p.b_alpha, dtype_text);
     const auto ma = mask_of("a_mask", p.a_mask), mb = mask_of("b_mask", p.b_mask);
     frame_report r;
     {
         py::gil_scoped_release release;
         std::lock_guard<std::mutex> lock(d.busy);
-        r = d.det.process(a, b, ma, mb);
+        if constexpr (std::is_const_v<C>) {
+            r = d.det.detect(a, b, ma, mb);
+        } else {
+            r = d.det.process(a, b, ma, mb);
+        }
     }
-    if (!r.error.ok()) throw py::value_error(r.error.message());
-    return r;
+    return checked(r);
 }
 
-frame_report process(py_detector& d, const process_args& p) {
+// process() (in place) or detect() (read only), on float32 or float64 arrays.
+template <bool in_place>
+frame_report run(py_detector& d, const process_args& p) {
     const py::array a = as_array("a_color", p.a_color);
-    if (py::isinstance<py::array_t<float>>(a)) return process_typed<float>(d, p, "float32 (like a_color)");
-    if (py::isinstance<py::array_t<double>>(a)) return process_typed<double>(d, p, "float64 (like a_color)");
+    if (py::isinstance<py::array_t<float>>(a))
+        return run_typed<std::conditional_t<in_place, float, const float>>(d, p, "float32 (like a_color)");
+    if (py::isinstance<py::array_t<double>>(a))
+        return run_typed<std::conditional_t<in_place, double, const double>>(d, p, "float64 (like a_color)");
     throw py::type_error("a_color must be float32 or float64, not " + py::str(a.dtype()).cast<std::string>());
 }
 
@@ -287,7 +314,14 @@ const char* process_doc =
     "the same), shape (H, W, C), any strides; colour and variance writeable, variance with 1\n"
     "channel or as many as colour; alpha (H, W) or (H, W, 1); masks uint8 (H, W), writeable,\n"
     "receive MASK_* bits per pixel. ValueError for sizes, channels and options, TypeError for a\n"
-    "non-array, a wrong dtype or a read-only array. The GIL is released while the frame is processed.";
+    "non-array, a wrong dtype or a read-only array. The GIL is released while the frame is processed.\n"
+    "A frame with pixels that no usable pixel could rebuild returns a report with ok False (they\n"
+    "keep their values; report.error says why).";
+
+const char* detect_doc =
+    "detect(a_color, a_variance, b_color, b_variance, a_alpha=None, b_alpha=None, a_mask=None, b_mask=None)\n\n"
+    "Like process(), but writes only the masks (what process() would rebuild is marked MASK_FIREFLY\n"
+    "or MASK_NONFINITE) and the report; the half buffers are only read and may be read-only.";
 
 void bind_detector(py::module_& m) {
     py::class_<py_detector>(m, "Detector", detector_doc().c_str())
@@ -302,8 +336,15 @@ void bind_detector(py::module_& m) {
         .def(
             "process",
             [](py_detector& d, py::object ac, py::object av, py::object bc, py::object bv, py::object aa, py::object ba,
-               py::object am, py::object bm) { return process(d, process_args{ac, av, bc, bv, aa, ba, am, bm}); },
+               py::object am, py::object bm) { return run<true>(d, process_args{ac, av, bc, bv, aa, ba, am, bm}); },
             process_doc, py::arg("a_color"), py::arg("a_variance"), py::arg("b_color"), py::arg("b_variance"),
+            py::arg("a_alpha") = py::none(), py::arg("b_alpha") = py::none(), py::arg("a_mask") = py::none(),
+            py::arg("b_mask") = py::none())
+        .def(
+            "detect",
+            [](py_detector& d, py::object ac, py::object av, py::object bc, py::object bv, py::object aa, py::object ba,
+               py::object am, py::object bm) { return run<false>(d, process_args{ac, av, bc, bv, aa, ba, am, bm}); },
+            detect_doc, py::arg("a_color"), py::arg("a_variance"), py::arg("b_color"), py::arg("b_variance"),
             py::arg("a_alpha") = py::none(), py::arg("b_alpha") = py::none(), py::arg("a_mask") = py::none(),
             py::arg("b_mask") = py::none());
 }
@@ -317,6 +358,7 @@ PYBIND11_MODULE(firefly, m) {
     m.attr("MASK_HIGHLIGHT") = firefly::mask_bits::highlight;
     m.attr("MASK_NONFINITE") = firefly::mask_bits::nonfinite;
     m.attr("MASK_CONSISTENT") = firefly::mask_bits::consistent;
+    m.attr("MASK_OTHER_HALF") = firefly::mask_bits::other_half;
     bind_reports(m);
     bind_detector(m);
 }

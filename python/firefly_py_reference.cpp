@@ -118,7 +118,9 @@ int run(const frame_spec& s, const detector_options& o, int threads) {
     firefly::detector d(o, firefly::executor::threads(static_cast<unsigned>(threads)));
     const firefly::frame_report r = d.process(a, b, *firefly::make_image_view(mask[0].data(), s.width, s.height),
                                               *firefly::make_image_view(mask[1].data(), s.width, s.height));
-    if (!r.error.ok()) return std::fprintf(stderr, "%s\n", r.error.message()), 1;
+    // Like the module: a processed frame with unreachable pixels still has a report.
+    if (!r.ok() && r.error.code() != firefly::errc::no_valid_pixels)
+        return std::fprintf(stderr, "%s\n", r.error.message()), 1;
     for (int i = 0; i < 4; ++i)
         if (!write_file(s.dir + "/" + names[i], data[i].data(), data[i].size())) return 1;
     if (!write_file(s.dir + "/a_mask", mask[0].data(), n) || !write_file(s.dir + "/b_mask", mask[1].data(), n)) return 1;

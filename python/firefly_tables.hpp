@@ -38,6 +38,12 @@ struct enum_names<firefly::lambda_method> {
 };
 
 template <>
+struct enum_names<firefly::rebuild_source> {
+    using E = firefly::rebuild_source;
+    static constexpr std::pair<const char*, E> values[] = {{"other_half", E::other_half}, {"spatial", E::spatial}};
+};
+
+template <>
 struct enum_names<firefly::errc> {
     using E = firefly::errc;
     static constexpr std::pair<const char*, E> values[] = {
@@ -49,7 +55,8 @@ struct enum_names<firefly::errc> {
         {"size_mismatch", E::size_mismatch},
         {"channel_mismatch", E::channel_mismatch},
         {"invalid_argument", E::invalid_argument},
-        {"no_valid_pixels", E::no_valid_pixels}};
+        {"no_valid_pixels", E::no_valid_pixels},
+        {"aliased_views", E::aliased_views}};
 };
 
 // The name of an enum value; nullptr when the list above misses it.
@@ -79,6 +86,8 @@ void for_each_option(F&& f) {
     f("sigma", [](O& o) -> auto& { return o.reconstruction.sigma; });
     f("tolerance", [](O& o) -> auto& { return o.reconstruction.tolerance; });
     f("max_iterations", [](O& o) -> auto& { return o.reconstruction.max_iterations; });
+    f("rebuild", [](O& o) -> auto& { return o.rebuild; });
+    f("blend_spatial", [](O& o) -> auto& { return o.blend_spatial; });
     f("reconstruct", [](O& o) -> auto& { return o.reconstruct; });
 }
 
@@ -99,6 +108,8 @@ void for_each_half_field(F&& f) {
     f("consistent", &H::consistent);
     f("fireflies", &H::fireflies);
     f("repaired", &H::repaired);
+    f("from_other_half", &H::from_other_half);
+    f("unreachable", &H::unreachable);
     f("phase1_rounds", &H::phase1_rounds);
     f("phase2_iterations", &H::phase2_iterations);
     f("final_change", &H::final_change);

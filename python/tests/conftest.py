@@ -25,8 +25,9 @@ def make_frame(seed=7, height=72, width=96, color_channels=3, variance_channels=
     radiance = base[..., None] * tint
     sigma = 0.6 * radiance  # per-sample standard deviation
     out = {}
-    highlights = [(20, 30), (20, 31), (21, 30), (21, 31)]
-    fireflies = [(5, 7), (40, 60), (60, 12), (33, 90)]
+    inside = lambda points: [(y, x) for y, x in points if y < height and x < width]
+    highlights = inside([(20, 30), (20, 31), (21, 30), (21, 31)])
+    fireflies = inside([(5, 7), (40, 60), (60, 12), (33, 90)])
     for h in "ab":
         color = radiance + rng.standard_normal(radiance.shape) * sigma / np.sqrt(spp)
         samples = np.sqrt(spp) * np.abs(rng.standard_normal(radiance.shape))
@@ -45,8 +46,10 @@ def make_frame(seed=7, height=72, width=96, color_channels=3, variance_channels=
     for p in fireflies:  # one sample of 2000 in half A
         out["a_color"][p][:3] += 2000 / spp
         out["a_variance"][p] += (2000 / spp) ** 2 / spp
-    out["b_color"][50, 50] = np.nan
-    out["fireflies"], out["highlights"], out["nan"] = fireflies, highlights, [(50, 50)]
+    nan = inside([(50, 50)])
+    for p in nan:
+        out["b_color"][p] = np.nan
+    out["fireflies"], out["highlights"], out["nan"] = fireflies, highlights, nan
     return out
 
 

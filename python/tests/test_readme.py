@@ -1,0 +1,80 @@
+"""The README's Python example runs as written, on EXRs written here with OpenImageIO, and
+gives the module's (and the command-line tool's) bits; `cmake --install` puts an importable
+module under the prefix."""
+import os
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import firefly
+from conftest import make_frame, same_bits
+
+NAMES = ["R", "G", "B", "Variance.R", "Variance.G", "Variance.B"]
+
+
+def readme_example():
+    path = os.environ.get("FIREFLY_README")
+    if not path:
+        pytest.skip("FIREFLY_README is not set (run the tests through ctest)")
+    text = open(path, encoding="utf-8").read()
+    section = text.split("\n## Python\n", 1)[1].split("\n## ", 1)[0]
+    return re.search(r"```python\n(.*?)```", section, re.S).group(1)
+
+
+def write_half(oiio, path, color, variance):
+    # The variance channels first and reversed: the example must pick channels by name.
+    order = ["Variance.B", "Variance.G", "Variance.R", "R", "G", "B"]
+    px = np.concatenate([color, variance], axis=-1)[..., [NAMES.index(n) for n in order]]
+    spec = oiio.ImageSpec(px.shape[1], px.shape[0], 6, oiio.FLOAT)
+    spec.channelnames = tuple(order)
+    buf = oiio.ImageBuf(spec)
+    buf.set_pixels(oiio.ROI(), np.ascontiguousarray(px))
+    assert buf.write(str(path)), oiio.geterror()
+
+
+def test_readme_example_runs_and_matches(tmp_path):
+    oiio = pytest.importorskip("OpenImageIO")
+    code = readme_example()
+    assert len(code.strip().splitlines()) <= 12
+    frame = make_frame(seed=4)
+    write_half(oiio, tmp_path / "half_a.exr", frame["a_color"], frame["a_variance"])
+    write_half(oiio, tmp_path / "half_b.exr", frame["b_color"], frame["b_variance"])
+    env = dict(os.environ)
+    done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+
+    arrays = {k: frame[k].copy() for k in ("a_color", "a_variance", "b_color", "b_variance")}
+    rep = firefly.Detector().process(**arrays)
+    removed = rep.half[0].fireflies + rep.half[1].fireflies
+    assert removed >= len(frame["fireflies"])
+    assert done.stdout.strip() == "%d fireflies removed" % removed
+    clean = oiio.ImageBuf(str(tmp_path / "clean.exr")).get_pixels(oiio.FLOAT)
+    assert same_bits(clean, 0.5 * arrays["a_color"] + 0.5 * arrays["b_color"])
+
+    cli = os.environ.get("FIREFLY_CLI")
+    if cli:  # the command-line tool's combined colour, from the same files
+        subprocess.run([cli, "half_a.exr", "half_b.exr", "-o", "cli.exr"], cwd=tmp_path, check=True,
+                       capture_output=True)
+        buf = oiio.ImageBuf(str(tmp_path / "cli.exr"))
+        names = list(buf.spec().channelnames)
+        px = buf.get_pixels(oiio.FLOAT)[..., [names.index(c) for c in ("R", "G", "B")]]
+        assert same_bits(clean, np.ascontiguousarray(px))
+
+
+def test_install_puts_an_importable_module_under_the_prefix(tmp_path):
+    build, site = os.environ.get("FIREFLY_BUILD_DIR"), os.environ.get("FIREFLY_PYTHON_INSTALL_DIR")
+    if not build or not site:
+        pytest.skip("FIREFLY_BUILD_DIR is not set (run the tests through ctest)")
+    cmake = os.environ.get("CMAKE_COMMAND", "cmake")
+    subprocess.run([cmake, "--install", build, "--component", "python", "--prefix", str(tmp_path)],
+                   check=True, capture_output=True)
+    installed = list((tmp_path / site).glob("firefly*.so"))
+    assert len(installed) == 1
+    env = dict(os.environ, PYTHONPATH=str(tmp_path / site))
+    done = subprocess.run([sys.executable, "-c", "import firefly; print(firefly.__file__, firefly.__version__)"],
+                          env=env, cwd=tmp_path, capture_output=True, text=True, check=True)
+    assert done.stdout.split()[0] == str(installed[0])
+    assert done.stdout.split()[1] == firefly.__version__

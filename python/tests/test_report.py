@@ -1,0 +1,120 @@
+"""The frame report as attributes and as plain Python types, the options as keywords and
+back, the masks, and the module's constants."""
+import json
+import re
+
+import numpy as np
+import pytest
+
+import firefly
+from conftest import arrays_of, make_frame
+
+HALF_FIELDS = ["pixels", "valid", "ignored", "nonfinite", "negative_variance", "median", "mad", "bound",
+               "outliers", "highlights", "consistent", "fireflies", "repaired", "from_other_half", "unreachable", "phase1_rounds",
+               "phase2_iterations", "final_change", "reconstruction"]
+FRAME_FIELDS = ["ok", "error", "both_outliers", "variance_calibration", "lambdas_computed", "scratch_bytes", "half"]
+
+
+def public(obj):
+    return {n for n in dir(obj) if not n.startswith("_") and n != "as_dict"}
+
+
+@pytest.fixture
+def processed():
+    frame = make_frame(alpha=True)
+    h, w = frame["a_color"].shape[:2]
+    masks = [np.full((h, w), 255, np.uint8) for _ in range(2)]
+    rep = firefly.Detector().process(**arrays_of(frame), a_mask=masks[0], b_mask=masks[1])
+    return frame, masks, rep
+
+
+def test_report_fields(processed):
+    frame, _, rep = processed
+    h, w = frame["a_color"].shape[:2]
+    assert set(HALF_FIELDS) <= public(rep.half[0])
+    assert set(FRAME_FIELDS) <= public(rep)
+    a, b = rep.half
+    assert a.pixels == b.pixels == h * w
+    assert a.ignored == 4 * h  # the transparent border
+    assert a.valid + a.ignored + a.nonfinite == h * w
+    assert b.nonfinite == b.repaired == len(frame["nan"])
+    assert a.fireflies >= len(frame["fireflies"])
+    assert a.highlights >= len(frame["highlights"]) - 1 and b.highlights >= 1
+    assert rep.both_outliers >= a.highlights
+    assert a.outliers == a.highlights + a.consistent + a.fireflies
+    assert a.median > 0 and a.mad > 0 and a.bound >= a.outliers
+    assert rep.lambdas_computed > 0 and rep.scratch_bytes > 0 and rep.variance_calibration > 0
+    assert rep.ok and rep.error.ok and rep.error.code == "ok"
+    assert a.unreachable == b.unreachable == 0 and a.from_other_half <= a.fireflies + a.repaired
+    assert a.reconstruction.ok and a.reconstruction.message == "ok"
+
+
+def test_as_dict_is_plain_python_and_matches_the_attributes(processed):
+    _, _, rep = processed
+    d = rep.as_dict()
+    assert set(d) == public(rep) - {"ok"}  # every field, nothing else
+    assert json.loads(json.dumps(d)) == d
+    for half, hd in zip(rep.half, d["half"]):
+        assert set(hd) == public(half)
+        assert hd == half.as_dict()
+        for name in HALF_FIELDS:
+            value = getattr(half, name)
+            assert hd[name] == (value.as_dict() if name == "reconstruction" else value)
+    assert d["error"] == {"ok": True, "code": "ok", "message": "ok"}
+    assert d["half"][0]["fireflies"] == rep.half[0].fireflies
+    assert re.match(r"FrameReport\(\{'error'", repr(rep))
+
+
+def test_masks(processed):
+    frame, masks, rep = processed
+    a, b = masks
+    for p in frame["fireflies"]:
+        assert a[p] & firefly.MASK_FIREFLY
+    for p in frame["nan"]:
+        assert b[p] & firefly.MASK_NONFINITE
+    assert np.count_nonzero(a & firefly.MASK_FIREFLY) == rep.half[0].fireflies
+    assert np.count_nonzero(b & firefly.MASK_HIGHLIGHT) == rep.half[1].highlights
+    assert np.count_nonzero(a & firefly.MASK_CONSISTENT) == rep.half[0].consistent
+    assert np.count_nonzero(a & firefly.MASK_OTHER_HALF) == rep.half[0].from_other_half
+    assert np.all(a < 32) and np.all(b < 32)  # every pixel written (they started at 255)
+    bits = [firefly.MASK_FIREFLY, firefly.MASK_HIGHLIGHT, firefly.MASK_NONFINITE, firefly.MASK_CONSISTENT,
+            firefly.MASK_OTHER_HALF]
+    assert bits == [1, 2, 4, 8, 16]
+
+
+def test_options_round_trip():
+    defaults = firefly.Detector().options
+    assert defaults["highlight_rule"] == "confident" and defaults["alpha"] == 0.05
+    changed = {"alpha": 0.01, "bound_threshold": 3.0, "reduction": "max", "lambdas": "normal",
+               "highlight_rule": "agree", "max_ratio": 3.0, "max_relative_error": 0.6, "min_excess_z": 0.0,
+               "cluster_relative_error": 0.0, "kernel_width": 7, "sigma": 1.5, "tolerance": 1e-2,
+               "max_iterations": 0, "rebuild": "spatial", "blend_spatial": False, "reconstruct": False}
+    assert set(changed) == set(defaults)  # every option is covered here
+    det = firefly.Detector(threads=2, **changed)
+    assert det.options == changed and det.threads == 2
+    assert firefly.Detector(**det.options).options == changed
+    for name in defaults:
+        assert name + "=" in firefly.Detector.__doc__
+
+
+def test_options_change_the_result():
+    frame = make_frame()
+    paper = firefly.Detector(highlight_rule="same_pixel", min_excess_z=0.0).process(**arrays_of(make_frame()))
+    default = firefly.Detector().process(**arrays_of(frame))
+    assert paper.as_dict() != default.as_dict()
+
+
+def test_float64_frame():
+    frame = make_frame(dtype=np.float64)
+    arrays = arrays_of(frame)
+    before = arrays["a_color"].copy()
+    rep = firefly.Detector().process(**arrays)
+    assert arrays["a_color"].dtype == np.float64
+    assert rep.half[0].fireflies >= len(frame["fireflies"])
+    changed = np.any(arrays["a_color"] != before, axis=-1)
+    assert all(changed[p] for p in frame["fireflies"])
+    assert np.count_nonzero(changed) == rep.half[0].fireflies  # nothing else touched
+
+
+def test_version():
+    assert re.fullmatch(r"\d+\.\d+\.\d+", firefly.__version__)
