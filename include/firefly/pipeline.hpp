@@ -439,7 +439,7 @@ private:
         if (pairs_.empty() && !single && rep.half[0].nonfinite + rep.half[1].nonfinite == 0) return;
         rep.variance_calibration = calibrate(a, b);
         decide_pairs(a, b, rep.variance_calibration);
-        if (single && options_.highlight.min_excess_z > 0) decide_singles(a, b, rep);
+        if (single) decide_singles(a, b, rep);
     }
 
     // Pixels that are outliers in both halves. A pair that passes the rule strictly is a
@@ -456,11 +456,15 @@ private:
             const int y = static_cast<int>(i / static_cast<std::uint32_t>(w));
             const double la = mean_colour(a.color, x, y), lb = mean_colour(b.color, x, y);
             const double va = reduced_variance(a.variance, x, y), vb = reduced_variance(b.variance, x, y);
-            if (!is_highlight(ho, la, lb, va, vb, calibration, cluster)) return 0;
-            // A firefly may still sit on top of the highlight in one half: that half then
-            // exceeds the other by far more than the noise, and only it is rebuilt.
+            // A firefly may sit on top of a highlight in one half: that half then exceeds the
+            // other by far more than the other's noise. It is rebuilt, and the other half is
+            // judged on its own (as if both halves held its value).
             const bool a_over = ho.min_excess_z > 0 && exceeds_other_half(ho, la, lb, vb, calibration);
             const bool b_over = ho.min_excess_z > 0 && exceeds_other_half(ho, lb, la, va, calibration);
+            const bool kept = a_over   ? is_highlight(ho, lb, lb, vb, vb, calibration, cluster)
+                              : b_over ? is_highlight(ho, la, la, va, va, calibration, cluster)
+                                       : is_highlight(ho, la, lb, va, vb, calibration, cluster);
+            if (!kept) return 0;
             if (!a_over) lab[0][i] |= highlight_bit;
             if (!b_over) lab[1][i] |= highlight_bit;
             return cluster ? 2 : 1;
@@ -494,21 +498,32 @@ private:
     }
 
     // Outliers of one half only: kept when they do not stand out against the other half.
+    // Where the other half is non-finite (a failed bucket) there is nothing to compare
+    // with: the outlier is judged on its own relative error, as the pair rule would judge
+    // two halves holding its value (a line of detail passes, a lone firefly sample does not).
     template <class C, class V, class A>
     void decide_singles(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b, const frame_report& rep) {
         std::uint8_t* lab[2] = {halves_[0].label.data(), halves_[1].label.data()};
         const half_buffer<C, V, A>* hb[2] = {&a, &b};
         const int w = a.color.width();
+        const double cal = rep.variance_calibration;
+        const highlight_rule rule = options_.highlight.rule;
+        const bool judges_confidence = rule == highlight_rule::confident || rule == highlight_rule::confident_and_agree;
         for (int h = 0; h < 2; ++h)
             for (std::size_t j = 0; j < rep.half[h].outliers; ++j) {
                 const std::uint32_t i = halves_[h].order[j];
-                if (lab[1 - h][i] & outlier_bit) continue;            // a pair, decided above
-                if (cls(lab[1 - h][i]) == nonfinite_class) continue;  // nothing to compare with
+                if (lab[1 - h][i] & outlier_bit) continue;  // a pair, decided above
                 const int x = static_cast<int>(i % static_cast<std::uint32_t>(w));
                 const int y = static_cast<int>(i / static_cast<std::uint32_t>(w));
+                if (cls(lab[1 - h][i]) == nonfinite_class) {
+                    const double l = mean_colour(hb[h]->color, x, y), v = reduced_variance(hb[h]->variance, x, y);
+                    if (judges_confidence && is_highlight(options_.highlight, l, l, v, v, cal))
+                        lab[h][i] |= highlight_bit;
+                    continue;
+                }
                 if (!exceeds_other_half(options_.highlight, mean_colour(hb[h]->color, x, y),
                                         mean_colour(hb[1 - h]->color, x, y),
-                                        reduced_variance(hb[1 - h]->variance, x, y), rep.variance_calibration))
+                                        reduced_variance(hb[1 - h]->variance, x, y), cal))
                     lab[h][i] |= consistent_bit;
             }
     }

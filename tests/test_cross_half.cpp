@@ -1,0 +1,264 @@
+// Rebuilding from the other half (issue: reconstruction that never smears).
+#include <firefly/firefly.hpp>
+#include <firefly/sim/metrics.hpp>
+#include <firefly/sim/scene.hpp>
+
+#include <cmath>
+#include <cstring>
+#include <vector>
+
+#include "catch.hpp"
+
+using namespace firefly;
+
+namespace {
+struct frame_views {
+    sim::frame f;
+    half_buffer<float> h[2];
+    explicit frame_views(sim::frame fr) : f(std::move(fr)) {
+        for (int i = 0; i < 2; ++i) {
+            h[i].color = *make_image_view(f.color[i].data(), f.width, f.height, 3);
+            h[i].variance = *make_image_view(f.variance[i].data(), f.width, f.height, 3);
+            if (!f.alpha.empty())
+                h[i].alpha = *make_image_view(static_cast<const float*>(f.alpha.data()), f.width, f.height, 1);
+        }
+    }
+    frame_views(const frame_views&) = delete;
+    std::size_t at(int x, int y) const { return static_cast<std::size_t>(y) * static_cast<std::size_t>(f.width) + static_cast<std::size_t>(x); }
+    void set(int half, int x, int y, float value, float variance) {
+        for (int c = 0; c < 3; ++c) {
+            f.color[half][at(x, y) * 3 + static_cast<std::size_t>(c)] = value;
+            f.variance[half][at(x, y) * 3 + static_cast<std::size_t>(c)] = variance;
+        }
+    }
+    float col(int half, int x, int y, int c = 0) const { return f.color[half][at(x, y) * 3 + static_cast<std::size_t>(c)]; }
+    float var(int half, int x, int y, int c = 0) const { return f.variance[half][at(x, y) * 3 + static_cast<std::size_t>(c)]; }
+};
+
+sim::frame flat(int w, int h, unsigned seed) { return sim::simulate(sim::named_scene("flat", w, h, seed)); }
+
+// relMSE of the combined image over a rectangle.
+double region_relmse(const sim::frame& f, const std::vector<float>* col, int x0, int y0, int x1, int y1) {
+    std::vector<float> img, ref;
+    for (int y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x)
+            for (int c = 0; c < 3; ++c) {
+                const std::size_t j = (static_cast<std::size_t>(y) * static_cast<std::size_t>(f.width) + static_cast<std::size_t>(x)) * 3 + static_cast<std::size_t>(c);
+                img.push_back(0.5f * (col[0][j] + col[1][j]));
+                ref.push_back(f.expected[j]);
+            }
+    return sim::relmse(img.data(), ref.data(), img.size() / 3);
+}
+}  // namespace
+
+TEST_CASE("a one-half firefly on detail takes the other half's value, not its neighbours'", "[cross_half]") {
+    // A bright one-pixel line (x = 20) on a dark ground; a firefly on the line in half A.
+    frame_views v(flat(48, 40, 21));
+    for (int y = 0; y < 40; ++y)
+        for (int half = 0; half < 2; ++half) v.set(half, 20, y, 8.0f + 0.1f * static_cast<float>(half), 0.04f);
+    v.set(0, 20, 15, 900.0f, 810000.0f);
+    const float b_value = v.col(1, 20, 15);
+    detector d;
+    const frame_report r = d.process(v.h[0], v.h[1]);
+    REQUIRE(r.ok());
+    CHECK(r.half[0].fireflies == 1);
+    CHECK(r.half[0].from_other_half == 1);
+    // the neighbours along the line are outliers (excluded), the rest are ground at ~0.5: a
+    // spatial estimate would be ~0.5; the other half says 8.1, and its bias test agrees.
+    CHECK(std::fabs(v.col(0, 20, 15) - b_value) < 0.05f * b_value);
+    // the rebuilt variance is the other half's (the estimate's own variance)
+    CHECK(v.var(0, 20, 15) == Approx(v.var(1, 20, 15)).epsilon(0.05));
+    // the paper's spatial rule smears the line's pixel into the ground
+    frame_views p(flat(48, 40, 21));
+    for (int y = 0; y < 40; ++y)
+        for (int half = 0; half < 2; ++half) p.set(half, 20, y, 8.0f + 0.1f * static_cast<float>(half), 0.04f);
+    p.set(0, 20, 15, 900.0f, 810000.0f);
+    detector_options o;
+    o.rebuild = rebuild_source::spatial;
+    detector ds(o);
+    REQUIRE(ds.process(p.h[0], p.h[1]).ok());
+    CHECK(p.col(0, 20, 15) < 2.0f);
+}
+
+TEST_CASE("in a smooth region the spatial estimate is blended in", "[cross_half]") {
+    frame_views v(flat(40, 40, 5));
+    v.set(0, 20, 20, 500.0f, 250000.0f);
+    const float b_value = v.col(1, 20, 20);
+    detector_options no_blend;
+    no_blend.blend_spatial = false;
+    frame_views w(flat(40, 40, 5));
+    w.set(0, 20, 20, 500.0f, 250000.0f);
+    detector d, dn(no_blend);
+    REQUIRE(d.process(v.h[0], v.h[1]).ok());
+    REQUIRE(dn.process(w.h[0], w.h[1]).ok());
+    CHECK(w.col(0, 20, 20) == b_value);  // the other half alone: its value, bit for bit
+    CHECK(v.col(0, 20, 20) != b_value);  // blended: the neighbours carry weight
+    // the blend has a smaller variance than the other half alone
+    CHECK(v.var(0, 20, 20) < w.var(0, 20, 20));
+    // and lies between the spatial estimate (~0.5) and the other half's value
+    const double lo = std::min(0.5, static_cast<double>(b_value)) - 0.2, hi = std::max(0.5, static_cast<double>(b_value)) + 0.2;
+    CHECK(v.col(0, 20, 20) > lo);
+    CHECK(v.col(0, 20, 20) < hi);
+}
+
+TEST_CASE("a failed bucket is rebuilt from the other half, not smeared from its rim", "[cross_half]") {
+    sim::scene sc = sim::named_scene("failed_bucket", 256, 192, 3);
+    sc.effects |= sim::fine_detail;  // detail in the bucket: what a smear would lose
+    sim::scene intact = sc;
+    intact.effects &= ~sim::failed_bucket;
+    frame_views v(sim::simulate(sc)), ref(sim::simulate(intact));
+    // the bucket: non-finite in half A only
+    int x0 = 1 << 30, y0 = 1 << 30, x1 = -1, y1 = -1;
+    for (int y = 0; y < 192; ++y)
+        for (int x = 0; x < 256; ++x)
+            if (v.f.nonfinite[0][v.at(x, y)] && !std::isfinite(v.col(0, x, y))) {
+                x0 = std::min(x0, x), y0 = std::min(y0, y), x1 = std::max(x1, x + 1), y1 = std::max(y1, y + 1);
+            }
+    REQUIRE(x1 - x0 >= 16);
+    detector d, d_ref;
+    const frame_report r = d.process(v.h[0], v.h[1]);
+    REQUIRE(r.ok());
+    CHECK(r.half[0].phase1_rounds <= 2);  // no filling from the rim inwards
+    CHECK(r.half[0].from_other_half >= static_cast<std::size_t>((x1 - x0) * (y1 - y0)));
+    REQUIRE(d_ref.process(ref.h[0], ref.h[1]).ok());
+    const double bucket = region_relmse(v.f, v.f.color, x0, y0, x1, y1);
+    const double intact_err = region_relmse(ref.f, ref.f.color, x0, y0, x1, y1);
+    INFO("bucket relMSE " << bucket << ", intact " << intact_err);
+    CHECK(bucket < 8.0 * intact_err);  // half the samples there (measured 5.6x), not a blur
+    // the paper's spatial rule fills the square from its rim: a blur, far worse
+    frame_views s(sim::simulate(sc));
+    detector_options o;
+    o.rebuild = rebuild_source::spatial;
+    detector ds(o);
+    REQUIRE(ds.process(s.h[0], s.h[1]).ok());
+    CHECK(region_relmse(s.f, s.f.color, x0, y0, x1, y1) > 2.0 * bucket);  // measured 3.5x
+}
+
+TEST_CASE("spatial sources exclude every outlier: no firefly is rebuilt from a kept highlight", "[cross_half]") {
+    frame_views v(flat(40, 40, 8));
+    // a confident one-pixel highlight, and two pixels away (inside the kernel, outside the
+    // cluster rule's 8 neighbours) a firefly in BOTH halves (two samples that met): rebuilt
+    // spatially in each half, from clean neighbours only.
+    for (int half = 0; half < 2; ++half) v.set(half, 20, 20, 30.0f, 0.5f);
+    for (int half = 0; half < 2; ++half) v.set(half, 22, 20, 600.0f, 360000.0f);
+    std::vector<std::uint8_t> ma(1600), mb(1600);
+    detector d;
+    const frame_report r = d.process(v.h[0], v.h[1], *make_image_view(ma.data(), 40, 40), *make_image_view(mb.data(), 40, 40));
+    REQUIRE(r.ok());
+    CHECK(ma[v.at(20, 20)] == mask_bits::highlight);
+    CHECK((ma[v.at(22, 20)] & mask_bits::firefly) != 0);
+    CHECK((ma[v.at(22, 20)] & mask_bits::other_half) == 0);  // bad in both halves: spatial
+    CHECK(v.col(0, 20, 20) == 30.0f);
+    CHECK(v.col(0, 22, 20) < 1.5f);  // the ground's level, not pulled towards 30
+    CHECK(v.col(1, 22, 20) < 1.5f);
+}
+
+TEST_CASE("a decision depends on the pixel and its neighbourhood, not on a far firefly", "[cross_half][highlight]") {
+    for (highlight_rule rule : {highlight_rule::agree, highlight_rule::same_pixel, highlight_rule::confident}) {
+        std::vector<float> results;
+        for (bool far_firefly : {false, true}) {
+            frame_views v(flat(128, 64, 4));
+            // a firefly on a highlight pixel in half A (the pair: A 140, B 40)
+            v.set(0, 30, 30, 140.0f, 10009.0f);
+            v.set(1, 30, 30, 40.0f, 9.0f);
+            if (far_firefly) v.set(1, 115, 30, 500.0f, 250000.0f);  // 85 pixels away, one half
+            detector_options o;
+            o.highlight.rule = rule;
+            detector d(o);
+            REQUIRE(d.process(v.h[0], v.h[1]).ok());
+            results.push_back(v.col(0, 30, 30));
+        }
+        CHECK(results[0] == results[1]);
+    }
+}
+
+TEST_CASE("detect() and reconstruct = false change nothing and count nothing as repaired", "[cross_half]") {
+    frame_views v(flat(32, 32, 9));
+    v.set(0, 5, 5, 400.0f, 160000.0f);
+    v.f.color[1][v.at(7, 7) * 3] = std::numeric_limits<float>::quiet_NaN();
+    const sim::frame before = v.f;
+    std::vector<std::uint8_t> mb(32 * 32);
+    detector d;
+    const half_buffer<const float> ca{v.h[0].color, v.h[0].variance, v.h[0].alpha};
+    const half_buffer<const float> cb{v.h[1].color, v.h[1].variance, v.h[1].alpha};
+    const frame_report r = d.detect(ca, cb, {}, *make_image_view(mb.data(), 32, 32));
+    REQUIRE(r.ok());
+    CHECK(r.half[0].fireflies == 1);
+    CHECK(r.half[1].nonfinite == 1);
+    CHECK(r.half[1].repaired == 0);
+    CHECK((mb[v.at(7, 7)] & mask_bits::nonfinite) != 0);
+    for (int k = 0; k < 2; ++k) CHECK(std::memcmp(before.color[k].data(), v.f.color[k].data(), before.color[k].size() * 4) == 0);
+    detector_options o;
+    o.reconstruct = false;
+    detector dn(o);
+    const frame_report rn = dn.process(v.h[0], v.h[1]);
+    CHECK(rn.half[1].repaired == 0);
+    CHECK(rn.half[0].from_other_half == 0);
+    for (int k = 0; k < 2; ++k) CHECK(std::memcmp(before.color[k].data(), v.f.color[k].data(), before.color[k].size() * 4) == 0);
+}
+
+TEST_CASE("rebuilding from the other half is bit-identical under flips, transposes and threads", "[cross_half][invariant]") {
+    const int w = 96, h = 96;
+    const sim::frame base = sim::simulate(sim::named_scene("production", w, h, 17));
+    // the 8 symmetries of the square, as maps from output to input coordinates
+    auto map = [&](int s, int x, int y) {
+        int u = (s & 1) ? w - 1 - x : x, v = (s & 2) ? h - 1 - y : y;
+        if (s & 4) std::swap(u, v);
+        return static_cast<std::size_t>(v) * static_cast<std::size_t>(w) + static_cast<std::size_t>(u);
+    };
+    auto transform = [&](const std::vector<float>& in, int s) {
+        std::vector<float> out(in.size());
+        for (int y = 0; y < h; ++y)
+            for (int x = 0; x < w; ++x)
+                std::memcpy(&out[(static_cast<std::size_t>(y) * w + static_cast<std::size_t>(x)) * 3], &in[map(s, x, y) * 3], 12);
+        return out;
+    };
+    auto run = [&](int s, executor e) {
+        sim::frame f = base;
+        for (int k = 0; k < 2; ++k) {
+            f.color[k] = transform(base.color[k], s);
+            f.variance[k] = transform(base.variance[k], s);
+        }
+        f.alpha.clear();
+        frame_views v(std::move(f));
+        detector d(detector_options{}, std::move(e));
+        (void)d.process(v.h[0], v.h[1]);
+        return std::vector<std::vector<float>>{v.f.color[0], v.f.color[1], v.f.variance[0]};
+    };
+    const auto ref = run(0, executor{});
+    for (int s = 1; s < 8; ++s) {
+        const auto out = run(s, s == 5 ? executor::threads(2) : executor{});
+        for (std::size_t k = 0; k < ref.size(); ++k) {
+            const std::vector<float> back = transform(ref[k], s);  // the reference, moved the same way
+            CHECK(std::memcmp(back.data(), out[k].data(), back.size() * 4) == 0);
+        }
+    }
+}
+
+TEST_CASE("detectors share one lambda cache", "[cross_half][pipeline]") {
+    auto cache = std::make_shared<lambda_cache>();
+    detector a(detector_options{}, executor{}, cache), b(detector_options{}, executor{}, a.shared_lambdas());
+    frame_views v(flat(64, 64, 2)), w(flat(64, 64, 2));
+    v.set(0, 10, 10, 500.0f, 250000.0f);
+    w.set(0, 10, 10, 500.0f, 250000.0f);
+    const frame_report ra = a.process(v.h[0], v.h[1]);
+    const frame_report rb = b.process(w.h[0], w.h[1]);
+    CHECK(ra.lambdas_computed > 0);
+    CHECK(rb.lambdas_computed == 0);  // every lambda the second needs, the first computed
+    CHECK(&a.lambdas() == &b.lambdas());
+}
+
+TEST_CASE("enum options outside their enumerators are errors", "[cross_half][errors]") {
+    detector_options o;
+    o.rebuild = static_cast<rebuild_source>(7);
+    CHECK(check_options(o).code() == errc::invalid_argument);
+    o = {};
+    o.highlight.rule = static_cast<highlight_rule>(9);
+    CHECK(check_options(o).code() == errc::invalid_argument);
+    o = {};
+    o.reduction = static_cast<variance_reduction>(200);
+    CHECK(check_options(o).code() == errc::invalid_argument);
+    o = {};
+    o.lambdas = static_cast<lambda_method>(3);
+    CHECK(check_options(o).code() == errc::invalid_argument);
+}
