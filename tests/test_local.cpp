@@ -284,6 +284,48 @@ TEST_CASE("local test: recall on moderate fireflies in a dark noisy frame", "[lo
         for (const float sc : r.half[h].score) CHECK(sc > 1.0f);
 }
 
+TEST_CASE("local test: the spatial test reaches moderate fireflies the pair test cannot", "[local]") {
+    // 8 samples of shape 1 per half: a pixel 4-8x its other half is ordinary for the pair
+    // test (m ~ 8), but far above the level 16 neighbours agree on.
+    frame_spec s;
+    s.w = s.h = 96;
+    s.spp = 8;
+    s.shape = 1.0;
+    s.decades = s.detail = s.highlights = s.background = false;
+    s.ff_rate = 0.01;
+    s.ff_lo = 4.0;
+    s.ff_hi = 8.0;
+    const test_frame f = make_frame(s);
+    local_test_options o;
+    std::size_t hits[2] = {0, 0}, false_pos[2] = {0, 0}, fireflies = 0;
+    for (int spatial = 0; spatial < 2; ++spatial) {
+        o.spatial = spatial != 0;
+        const local_test_result r = run(f, o);
+        for (int h = 0; h < 2; ++h)
+            for (const std::uint32_t i : r.half[h].index) (f.firefly[h][i] ? hits : false_pos)[spatial] += 1;
+        if (!o.spatial) CHECK(r.spatial == 0);
+    }
+    for (int h = 0; h < 2; ++h)
+        for (const std::uint8_t v : f.firefly[h]) fireflies += v;
+    INFO("pair only " << hits[0] << ", with spatial " << hits[1] << " of " << fireflies << "; false positives "
+                      << false_pos[0] << ", " << false_pos[1]);
+    REQUIRE(fireflies > 100);
+    CHECK(static_cast<double>(hits[0]) < 0.5 * static_cast<double>(fireflies));
+    CHECK(static_cast<double>(hits[1]) > 0.7 * static_cast<double>(fireflies));
+    CHECK(false_pos[1] <= 3);
+}
+
+TEST_CASE("local test: F upper tail against the closed form at d1 = 2", "[local]") {
+    // P(F(2, d2) > f) = (1 + 2 f / d2)^(-d2 / 2)
+    for (const double d2 : {2.0, 7.5, 32.0, 300.0, 5000.0})
+        for (const double f : {0.5, 1.0, 3.0, 10.0, 40.0}) {
+            const double want = std::pow(1.0 + 2.0 * f / d2, -0.5 * d2);
+            const double got = detail::f_upper_tail(f, 2.0, d2);
+            INFO("d2 " << d2 << ", f " << f << ": " << got << " against " << want);
+            CHECK(std::fabs(got - want) <= 1e-10 * want + 1e-300);
+        }
+}
+
 TEST_CASE("local test: a bright noisy region without fireflies is left alone", "[local]") {
     frame_spec s;
     s.w = s.h = 128;

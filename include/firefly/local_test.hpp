@@ -3,8 +3,10 @@
 // Model. The two halves hold independent means of the same pixel's samples. Whatever the
 // per-sample law, a half mean L is positive and, to its first two moments, a gamma variable
 // of shape m = E[L]^2 / Var[L] (m = N k for N samples of a gamma(k) law; Satterthwaite's
-// moment match otherwise). For two independent gamma(m) means of one expected value,
-// L_A / L_B ~ F(2m, 2m), and (Cacoullos 1965)
+// moment match otherwise).
+//
+// Pair test. For two independent gamma(m) means of one expected value, L_A / L_B ~ F(2m, 2m),
+// and (Cacoullos 1965)
 //
 //     T = sqrt(m / 2) (sqrt(L_A / L_B) - sqrt(L_B / L_A))  ~  Student t, 2m degrees of freedom,
 //
@@ -12,6 +14,15 @@
 // alike, in one frame or across frames. Half A is flagged when T > t(q) (one-sided: a
 // firefly adds light), half B when -T > t(q). A pixel is flagged in at most one half; an
 // outlier in both halves is left to the global test and the highlight check.
+//
+// Spatial test (options.spatial). One other half is a poor yardstick when every pixel is
+// noisy (m ~ 3-8): the n usable neighbours of both halves (16 in 3x3) estimate the level far
+// better. Where they are gamma(m) means of the pixel's own value, L_A / mean ~ F(2m, 2nm)
+// exactly. It is used only where the neighbourhood is homogeneous, by two checks at level
+// options.homogeneity: the other half at the pixel agrees with the mean (two-sided, Paulson's
+// normal approximation of F), and the levels' dispersion m sum (L / mean - 1)^2 is within
+// chi-square(n - 1) (Wilson-Hilferty). Fine detail, edges and highlights fail one or both.
+// Each test runs at q / 2 when both run.
 //
 // The shape m. 1/m = r = Var[L] / E[L]^2, the relative variance of a half mean, given per
 // pixel by the renderer's variance: r = (mean over channels of sd_c)^2 / (mean colour)^2
@@ -24,38 +35,40 @@
 // pixel: a highlight or an edge is noisier than its surroundings, and the other half says so.
 // Relative variances do not change across gradients, fine detail or texture that keep the
 // noise's character, only where the light transport changes. The estimate's own uncertainty
-// widens the t: df = 1 / (1/(2m) + 1/nu), nu = 4 n / (pi s^2) for a median of n values.
+// widens the pair test's t: df = 1 / (1/(2m) + 1/nu), nu = 4 n / (pi s^2) for a median of n.
 //
 // Assumptions: positive pixel values (a half whose mean colour is <= 0 is not tested); the
-// given variance is that of the half's mean (else set variance_scale); the neighbourhood's
-// light transport is like the pixel's (else the other half's r takes over, conservatively).
+// given variance is that of the half's mean (else set variance_scale); light-tailed enough
+// per-sample laws that the gamma moment match holds in the tail (gamma k >= 1 is measured;
+// heavier, e.g. lognormal, flags more than q).
 //
 // Promise. In a frame without fireflies, the expected share of tested pixel-halves flagged
 // is at most q (options.false_alarm, default 1e-4). Test [local][calibration]: gamma(k)
 // per-sample noise, k 1, 4, 16, 4 to 1024 samples per half, three decades, fine detail,
 // highlights (25x, per-sample shape 0.16), black background, alpha; 534k pixel-halves:
-//     q = 1e-3: 345 flagged (promise 534);  q = 1e-4: 30 flagged (promise 53)
-//     at 4 samples per half, q = 1e-4: 24 of 306k (promise 31), a third on highlights
-// On the simulator's null scenes (bench/research/local_eval.cpp) the share flagged follows q
-// from 1e-4 to 0.05 within a factor 0.7-0.9.
+//     q = 1e-3: 309 flagged (promise 534);  q = 1e-4: 49 flagged (promise 53)
+//     at 4 samples per half, q = 1e-4: 40 of 306k (promise 31, within the binomial margin)
+// The simulator's null scenes (bench/research/local_eval.cpp, 65k pixels each): 0.5-1.8 q.
 //
 // Measured with a stand-in rebuild (a pixel flagged in one half takes the other half's value;
 // bench/research/README.md has the tables):
-//     moderate fireflies (2-20x the pixel, 1% of pixels per half, 64 spp, gamma k = 4, dark
-//     frame): recall 0.97, 1 false positive in 32k pixel-halves (test "recall")
+//     moderate fireflies 2-20x, 1% of pixels per half, 64 spp, gamma k = 4, dark frame:
+//     recall 0.98 (test "recall"); 4-8x at 8 spp: recall 0.81, pair test alone 0.17
 //     three decades with 30-1000x fireflies ("decades"): recall 1.000 (global ESD 0.987)
-//     cycles-caustics: relMSE 0.078 alone, 0.0295 in union with the global ESD (= global)
-//     cycles-interior: relMSE 0.88 alone (the global ESD's flags: 0.132): every pixel there
-//     has m ~ 2-6, so a pixel 3x its other half is ordinary noise under the model and the
-//     test, calibrated, does not flag it. Pixels that both halves hold fireflies at are not
-//     seen at all.
+//     cycles-caustics: relMSE 0.062 alone; 0.0294 in union with the global ESD (0.0295)
+//     cycles-interior: relMSE 0.399 alone; 0.1235 in union with the global ESD (0.1324)
+//     Not seen: a pixel with fireflies in both halves; fireflies where every neighbour has
+//     one too (the spatial test's homogeneity checks fail there).
 //
 // Cost: one read pass over both halves' colour and variance (level and r per pixel and
-// half), then one pass over those arrays. The neighbourhood is read only for pixels that the
-// pair statistic with the other half's own r (an upper bound of T, with the threshold at
-// that r a lower bound of the real one) does not clear; thresholds come from a cache on a df
-// grid rounded down. Deterministic, no scan order: medians are order-free, so the flags are
-// the same under the 8 flips and transposes of the frame.
+// half), then one pass over those arrays reading each pixel's 3x3 levels. The neighbourhood
+// statistics (medians of r) are taken only for pixels that cheap bounds do not rule out: with
+// r~ >= r_other the pair statistic at the other half's r bounds T from above and the
+// threshold from below, and Paulson's z at m = 1 / r_other (less a margin of 1) bounds the
+// spatial test. Thresholds come from a cache on a df grid rounded down. About 3x the global
+// detection's time (bench/research/README.md). Deterministic, no scan order: medians and the
+// sorted-level mean are order-free, so the flags are the same under the 8 flips and
+// transposes of the frame.
 #pragma once
 
 #include <algorithm>
@@ -84,6 +97,9 @@ struct local_test_options {
     double variance_scale = 1.0;    // turns the given variance into the variance of the half
                                     // mean (1: it already is; the number of samples when the
                                     // renderer stores the variance of the samples)
+    bool spatial = true;            // also test each half against its neighbourhood's level
+                                    // where that neighbourhood is homogeneous (q split evenly)
+    double homogeneity = 0.01;      // level of the two homogeneity checks that gate it
 };
 
 inline status check_local_test_options(const local_test_options& o) noexcept {
@@ -95,11 +111,13 @@ inline status check_local_test_options(const local_test_options& o) noexcept {
         return status{errc::invalid_argument, "local test: min_neighbours must be >= 1"};
     if (!(o.variance_scale > 0.0) || !std::isfinite(o.variance_scale))
         return status{errc::invalid_argument, "local test: variance_scale must be finite and > 0"};
+    if (!(o.homogeneity > 0.0 && o.homogeneity < 1.0))
+        return status{errc::invalid_argument, "local test: homogeneity must lie in (0, 1)"};
     return ok_status();
 }
 
-// Pixels flagged in one half, in row-major order (sorted), with their scores T / t_{2m}(q)
-// (> 1: how far past the threshold).
+// Pixels flagged in one half, in row-major order (sorted), with their scores (> 1: how far
+// past the threshold): T / t(q) for the pair test, z(p) / z(q) for the spatial test.
 struct local_flags {
     std::vector<std::uint32_t> index;
     std::vector<float> score;
@@ -109,6 +127,7 @@ struct local_test_result {
     local_flags half[2];
     std::size_t tested = 0;        // pixels tested (each tests both halves)
     std::size_t screened = 0;      // pixels whose neighbourhood statistics were computed
+    std::size_t spatial = 0;       // flags the spatial test added (not the pair test's)
 };
 
 // Memory reused across frames.
@@ -116,10 +135,12 @@ struct local_test_scratch {
     std::vector<double> level[2];  // mean colour; NaN where the pixel does not count
     std::vector<float> rel_var[2]; // relative variance r of the half mean; NaN where unusable
     std::vector<float> pool;
+    std::vector<double> levels;      // the neighbourhood's levels (spatial test)
     std::vector<double> thresholds;  // t_df(q) by df grid step (see detail::t_threshold)
     double thresholds_q = 0;
     std::size_t bytes() const noexcept {
-        return (level[0].capacity() + level[1].capacity() + thresholds.capacity()) * sizeof(double) +
+        return (level[0].capacity() + level[1].capacity() + levels.capacity() + thresholds.capacity()) *
+                   sizeof(double) +
                (rel_var[0].capacity() + rel_var[1].capacity() + pool.capacity()) * sizeof(float);
     }
 };
@@ -295,6 +316,136 @@ inline double t_threshold(local_test_scratch& s, double q, double df) {
     return t;
 }
 
+// Per-frame constants of the decision: the level each test runs at and its normal points.
+struct local_levels_q {
+    double q = 0, zq = 0;   // each test's level, and z_q
+    double z_half_h = 0;    // z at homogeneity / 2 (two-sided gate)
+    double z_h = 0;         // z at homogeneity (dispersion gate)
+    explicit local_levels_q(const local_test_options& o)
+        : q(o.spatial ? 0.5 * o.false_alarm : o.false_alarm),
+          zq(normal_upper_quantile(q)),
+          z_half_h(normal_upper_quantile(0.5 * o.homogeneity)),
+          z_h(normal_upper_quantile(o.homogeneity)) {}
+};
+
+// Paulson's (1942) normal approximation of F(d1, d2) at f: cube roots of the two chi-square
+// shares (Wilson-Hilferty). Screens and gates only; the decision uses the exact tail.
+inline double paulson_z(double f, double d1, double d2) noexcept {
+    const double c = std::cbrt(f), a1 = 2.0 / (9.0 * d1), a2 = 2.0 / (9.0 * d2);
+    return ((1.0 - a2) * c - (1.0 - a1)) / std::sqrt(a2 * c * c + a1);
+}
+
+// P(F > f) for F(d1, d2), f > 0: I_y(d2/2, d1/2) with y = d2 / (d2 + d1 f), by the continued
+// fraction on whichever side converges (the small tails the test asks for come out directly).
+inline double f_upper_tail(double f, double d1, double d2) noexcept {
+    const double a = 0.5 * d2, b = 0.5 * d1;
+    const double y = d2 / (d2 + d1 * f), y1 = d1 * f / (d2 + d1 * f);
+    const double log_front = a * std::log(y) + b * std::log(y1) - (std::lgamma(a) + std::lgamma(b) - std::lgamma(a + b));
+    if (y < (a + 1.0) / (a + b + 2.0)) return std::exp(log_front) * incbeta_cf(a, b, y) / a;
+    return 1.0 - std::exp(log_front) * incbeta_cf(b, a, y1) / b;
+}
+
+// Sum and count of the usable neighbours' levels in both halves (centre excluded), in scan
+// order: for the screen only, whose margin dwarfs any rounding.
+inline double neighbour_sum(const local_test_scratch& s, int w, int h, int x, int y, int radius,
+                            std::size_t& count) noexcept {
+    double sum = 0;
+    count = 0;
+    for (int yy = std::max(y - radius, 0); yy <= std::min(y + radius, h - 1); ++yy)
+        for (int xx = std::max(x - radius, 0); xx <= std::min(x + radius, w - 1); ++xx) {
+            if (xx == x && yy == y) continue;
+            const std::size_t j = static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(xx);
+            for (int half = 0; half < 2; ++half)
+                if (s.rel_var[half][j] == s.rel_var[half][j]) {
+                    sum += s.level[half][j];
+                    ++count;
+                }
+        }
+    return sum;
+}
+
+// The same levels into out, sorted, and their mean summed in that order: the same bits under
+// any flip or transpose of the frame.
+inline double neighbour_levels(const local_test_scratch& s, int w, int h, int x, int y, int radius,
+                               std::vector<double>& out) {
+    out.clear();
+    for (int yy = std::max(y - radius, 0); yy <= std::min(y + radius, h - 1); ++yy)
+        for (int xx = std::max(x - radius, 0); xx <= std::min(x + radius, w - 1); ++xx) {
+            if (xx == x && yy == y) continue;
+            const std::size_t j = static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(xx);
+            for (int half = 0; half < 2; ++half)
+                if (s.rel_var[half][j] == s.rel_var[half][j]) out.push_back(s.level[half][j]);
+        }
+    std::sort(out.begin(), out.end());
+    double sum = 0;
+    for (const double l : out) sum += l;
+    return out.empty() ? 0.0 : sum / static_cast<double>(out.size());
+}
+
+// The spatial test of the brighter half (level hi; the other half lo) against the mean mu of
+// n neighbour levels, all gamma(m) means of one value where the neighbourhood is homogeneous:
+// hi / mu ~ F(2m, 2nm). Gated by two checks at level h that the neighbourhood is homogeneous:
+// the other half agrees with mu (two-sided), and the levels' dispersion m sum (L/mu - 1)^2 is
+// within chi-square(n - 1). Returns the score z(p) / z(q), > 1 when flagged, else 0.
+inline double spatial_score(double hi, double lo, double m, const std::vector<double>& levels, double mu,
+                            const local_levels_q& k) noexcept {
+    const double n = static_cast<double>(levels.size());
+    const double d1 = 2.0 * m, d2 = 2.0 * n * m;
+    if (!(std::fabs(paulson_z(lo / mu, d1, d2)) < k.z_half_h)) return 0.0;
+    double dispersion = 0;
+    for (const double l : levels) dispersion += (l / mu - 1.0) * (l / mu - 1.0);
+    const double dof = n - 1.0, c = 2.0 / (9.0 * dof);  // chi-square point by Wilson-Hilferty
+    const double chi2_h = dof * std::pow(1.0 - c + k.z_h * std::sqrt(c), 3.0);
+    if (!(m * dispersion <= chi2_h)) return 0.0;
+    if (m > 1e4) {  // F near normal; lgamma would cancel
+        const double z = paulson_z(hi / mu, d1, d2);
+        return z > k.zq ? z / k.zq : 0.0;
+    }
+    const double p = f_upper_tail(hi / mu, d1, d2);
+    if (!(p <= k.q)) return 0.0;
+    return p > 0 ? normal_upper_quantile(p) / k.zq : static_cast<double>(std::numeric_limits<float>::max());
+}
+
+// One pixel, the brighter half hi: the pair test, then (options.spatial) the spatial test,
+// each at q / 2 when both run. Returns the score (> 1: flagged), 0 otherwise.
+inline double local_score(const local_test_options& o, const local_levels_q& k, local_test_scratch& s,
+                          local_test_result& res, int w, int h, int x, int y, int hi, bool& by_spatial) {
+    const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+    const double l_hi = s.level[hi][i], l_lo = s.level[1 - hi][i];
+    const double r_other = s.rel_var[1 - hi][i];
+    const double q = k.q, zq = k.zq;
+    // Screens, from r~ >= r_other (m <= 1 / r_other): the pair statistic with the other half's
+    // own r bounds T from above and the threshold from below; for the spatial test, the
+    // level ratio must exceed 1 and Paulson's z at m = 1 / r_other must come near z_q.
+    const double t_pair = pair_statistic(l_hi, l_lo, r_other);
+    const bool pair_may = t_pair > zq && t_pair > t_threshold(s, q, std::min(2.0 / r_other, 1e10));
+    double mu = 0;
+    bool spatial_may = false;
+    if (o.spatial) {
+        std::size_t count = 0;
+        const double sum = neighbour_sum(s, w, h, x, y, o.radius, count);
+        const double m_max = 1.0 / r_other, n = static_cast<double>(count);
+        spatial_may = count >= static_cast<std::size_t>(o.min_neighbours) && sum > 0 && l_hi * n > sum &&
+                      paulson_z(l_hi * n / sum, 2.0 * m_max, 2.0 * n * m_max) > zq - 1.0;
+        if (spatial_may) mu = neighbour_levels(s, w, h, x, y, o.radius, s.levels);
+    }
+    if (!pair_may && !spatial_may) return 0.0;
+    ++res.screened;
+    const pooled_estimate pooled = pooled_relative_variance(s.rel_var, w, h, x, y, o.radius, o.min_neighbours, s.pool);
+    if (!(pooled.nu == pooled.nu)) return 0.0;
+    const double r = std::max(pooled.r, r_other);
+    if (pair_may) {
+        const double t = pair_statistic(l_hi, l_lo, r);
+        // t with 2m degrees of freedom for the gamma law, widened by the uncertainty of r~
+        const double df = std::min(std::max(1.0 / (0.5 * r + 1.0 / pooled.nu), 1.0), 1e10);
+        const double threshold = t > zq ? t_threshold(s, q, df) : HUGE_VAL;
+        if (t > threshold) return t / threshold;
+    }
+    if (!spatial_may || !(mu > 0)) return 0.0;
+    by_spatial = true;
+    return spatial_score(l_hi, l_lo, 1.0 / r, s.levels, mu, k);
+}
+
 }  // namespace detail
 
 // Runs the local test on both halves. Views must share size, channel counts as for
@@ -316,37 +467,22 @@ status local_test(const local_half<C, V, A>& a, const local_half<C, V, A>& b, co
     detail::local_levels(a, options.variance_scale, scratch.level[0], scratch.rel_var[0]);
     detail::local_levels(b, options.variance_scale, scratch.level[1], scratch.rel_var[1]);
     const int w = a.color.width(), h = a.color.height();
-    const double zq = normal_upper_quantile(options.false_alarm);
+    const detail::local_levels_q k(options);
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
             const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
-            const double la = scratch.level[0][i], lb = scratch.level[1][i];
             const float ra = scratch.rel_var[0][i], rb = scratch.rel_var[1][i];
             if (!(ra == ra) || !(rb == rb)) continue;  // one half does not count, or not > 0
             ++result.tested;
+            const double la = scratch.level[0][i], lb = scratch.level[1][i];
             if (la == lb) continue;
             const int hi = la > lb ? 0 : 1;  // the half that could hold a firefly
-            const double l_hi = hi == 0 ? la : lb, l_lo = hi == 0 ? lb : la;
-            const double r_other = hi == 0 ? rb : ra;
-            // Screen: r~ >= r_other bounds T from above and df from above (so the threshold
-            // from below): most pixels are decided without the neighbourhood.
-            const double t_pair = detail::pair_statistic(l_hi, l_lo, r_other);
-            if (!(t_pair > zq)) continue;
-            if (!(t_pair > detail::t_threshold(scratch, options.false_alarm, std::min(2.0 / r_other, 1e10)))) continue;
-            ++result.screened;
-            const detail::pooled_estimate pooled = detail::pooled_relative_variance(
-                scratch.rel_var, w, h, x, y, options.radius, options.min_neighbours, scratch.pool);
-            if (!(pooled.nu == pooled.nu)) continue;
-            const double r = std::max(pooled.r, r_other);
-            const double t = detail::pair_statistic(l_hi, l_lo, r);
-            if (!(t > zq)) continue;
-            // t with 2m degrees of freedom for the gamma law, widened by the uncertainty of r~
-            const double df = std::min(std::max(1.0 / (0.5 * r + 1.0 / pooled.nu), 1.0), 1e10);
-            const double threshold = detail::t_threshold(scratch, options.false_alarm, df);
-            if (!(t > threshold)) continue;
-            const double score = std::min(t / threshold, static_cast<double>(std::numeric_limits<float>::max()));
+            bool by_spatial = false;
+            const double score = detail::local_score(options, k, scratch, result, w, h, x, y, hi, by_spatial);
+            if (!(score > 1.0)) continue;
             result.half[hi].index.push_back(static_cast<std::uint32_t>(i));
-            result.half[hi].score.push_back(static_cast<float>(score));
+            result.half[hi].score.push_back(static_cast<float>(std::min(score, static_cast<double>(FLT_MAX))));
+            result.spatial += by_spatial;
         }
     return ok_status();
 }
