@@ -19,6 +19,7 @@
 
 #include <algorithm>
 #include <cfloat>
+#include <chrono>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -136,7 +137,29 @@ struct [[nodiscard]] frame_report {
     double variance_calibration = 1.0;  // variance -> variance of the mean (highlight rule)
     std::size_t lambdas_computed = 0;   // lambda cache misses in this frame
     std::size_t scratch_bytes = 0;      // detector memory after this frame
+    // Wall time of each stage, milliseconds (both halves): standard deviations, bound and
+    // candidates; the ESD decisions; the highlight check; the other half's estimates; the
+    // writes, spatial reconstruction and masks.
+    enum stage { candidates, esd, highlights, other_half, rebuild, stages };
+    double stage_ms[stages] = {};
 };
+
+namespace detail {
+// Laps of a steady clock into an array of milliseconds.
+class stage_clock {
+public:
+    explicit stage_clock(double* ms) : ms_(ms), last_(std::chrono::steady_clock::now()) {}
+    void lap(int stage) {
+        const auto now = std::chrono::steady_clock::now();
+        ms_[stage] = std::chrono::duration<double, std::milli>(now - last_).count();
+        last_ = now;
+    }
+
+private:
+    double* ms_;
+    std::chrono::steady_clock::time_point last_;
+};
+}  // namespace detail
 
 class detector {
 public:
@@ -230,7 +253,9 @@ private:
         const half_buffer<C, V, A>* hb[2] = {&a, &b};
         const image_view<std::uint8_t>* masks[2] = {&mask_a, &mask_b};
         // Stage 1 (parallel): standard deviations, bound, ESD candidates, per half.
+        detail::stage_clock clock(rep.stage_ms);
         exec_.run(2, [&](std::size_t h) { detect_candidates(*hb[h], halves_[h], rep.half[h]); });
+        clock.lap(frame_report::candidates);
         // Stage 2 (serial): the ESD decision, reading and filling the lambda cache.
         {
             const std::lock_guard<std::mutex> lock(cache_->mutex());
@@ -238,15 +263,19 @@ private:
             for (int h = 0; h < 2; ++h) decide(halves_[h], rep.half[h]);
             rep.lambdas_computed = cache_->computed() - before;
         }
+        clock.lap(frame_report::esd);
         // Stage 3: the highlight check across halves.
         check_highlights(a, b, rep);
+        exec_.run(2, [&](std::size_t h) { mark_fixes(halves_[h], rep.half[h]); });
+        clock.lap(frame_report::highlights);
         // Stage 4 (parallel): what to rebuild; then the other half's estimates, all computed
         // before any is written; then writes, spatial reconstruction and masks.
-        exec_.run(2, [&](std::size_t h) { mark_fixes(halves_[h], rep.half[h]); });
         const bool cross = clean && options_.rebuild == rebuild_source::other_half;
         if (cross)
             exec_.run(2, [&](std::size_t h) { stage_cross_half(*hb[h], *hb[1 - h], halves_[h], halves_[1 - h], rep); });
+        clock.lap(frame_report::other_half);
         exec_.run(2, [&](std::size_t h) { finish(*hb[h], halves_[h], *masks[h], rep.half[h], clean, cross); });
+        clock.lap(frame_report::rebuild);
         for (const half_report& hr : rep.half)
             if (!hr.reconstruction.ok()) rep.error = hr.reconstruction;
         if (clean && rep.half[0].valid + rep.half[1].valid == 0 && rep.half[0].nonfinite + rep.half[1].nonfinite > 0)
