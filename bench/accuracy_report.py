@@ -18,7 +18,7 @@ from collections import defaultdict
 REAL = ("cycles-caustics", "cycles-interior", "cycles-caustics-seeds")
 PEERS = ("median3x3", "cycles_prefilter", "bcd_spikes", "nrd_clamp", "clamp4", "clamp16")
 COUNTERS = ("recall", "precision", "false_positive", "highlight_kept", "relmse", "changed", "worse",
-            "worse_of_changed", "energy", "energy_dark", "energy_bright")
+            "worse_of_changed", "energy", "energy_dark", "energy_bright", "error")
 
 
 def load(path):
@@ -82,7 +82,7 @@ def scene_table(sc, rs):
     print(head)
     print("|---" + "|---:" * (head.count("|") - 2) + "|")
     for r in shown(rs):
-        line = f"| {r['method']} | {fmt(r['relmse'])} | "
+        line = f"| {r['method']}{' (status not ok)' if r.get('error') else ''} | {fmt(r['relmse'])} | "
         if sim:
             line += f"{fmt(r['recall'], '.4f')} | {pct(r['false_positive'])} | {fmt(r['highlight_kept'], '.4f')} | "
         line += (f"{pct(r['changed'])} | {pct(r['worse'])} ({fmt(r['worse_of_changed'], '.2f')}) | "
@@ -338,8 +338,9 @@ This run: simulated frames {size}, {date}, {cpus} CPUs ({load}).
 ## What is measured
 
 - **Scenes.** Every named simulated scene (`firefly/sim/scenes.hpp`, ground truth known), the
-  hard low-sample variants `@16spp`, K-buffer variants `@k4`/`@k8` (the simulator's K buffers;
-  the half-buffer methods get their two halves, K/2 buffers each, the same samples), and the
+  hard low-sample variants `@16spp`, K-buffer variants `@k4`/`@k8` (the simulator's K buffers,
+  at most 1024x540; the half-buffer methods get their two halves, K/2 buffers each, the same
+  samples), and the
   real renders `cycles-caustics`, `cycles-interior` (half buffers with variance) and
   `cycles-caustics-seeds` (8 renders of 16 samples with different seeds, no variance: the
   halves are 4 + 4 renders with the variance of their mean from their spread; reference that of

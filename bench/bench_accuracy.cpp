@@ -60,27 +60,36 @@ struct scene_data {
     }
 };
 
-using halves_fn = std::function<void(half_buffer<float>&, half_buffer<float>&)>;
+using halves_fn = std::function<bool(half_buffer<float>&, half_buffer<float>&)>;  // false: error
 using buffers_fn = std::function<void(const firefly_peers::buffer_list&, std::size_t, float*)>;
+
+// A method on the two halves is made afresh for each benchmark (a detector keeps frame-sized
+// work buffers: hundreds of them kept alive would hold gigabytes at 2K).
+using halves_factory = std::function<halves_fn()>;
 
 struct config {
     std::string name;
-    halves_fn halves;    // a method on the two halves, or ...
+    halves_factory halves;  // a method on the two halves, or ...
     buffers_fn buffers;  // ... an estimator over the K buffers
     bool downstream = false;  // write its output for the NL-means column
 };
 
-halves_fn firefly_with(detector_options o) {
-    auto d = std::make_shared<detector>(o);
-    return [d](half_buffer<float>& a, half_buffer<float>& b) { (void)d->process(a, b); };
+halves_factory firefly_with(detector_options o) {
+    return [o] {
+        auto d = std::make_shared<detector>(o);
+        return halves_fn([d](half_buffer<float>& a, half_buffer<float>& b) { return d->process(a, b).error.ok(); });
+    };
 }
 
 // A peer cleans each half on its own, after the shared non-finite repair.
-halves_fn peer(std::function<void(const image_view<float>&, const image_view<float>&)> f) {
-    return [f](half_buffer<float>& a, half_buffer<float>& b) {
-        firefly_peers::repair_nonfinite(a.color, a.variance, b.color, b.variance);
-        f(a.color, a.variance);
-        f(b.color, b.variance);
+halves_factory peer(std::function<void(const image_view<float>&, const image_view<float>&)> f) {
+    return [f] {
+        return halves_fn([f](half_buffer<float>& a, half_buffer<float>& b) {
+            firefly_peers::repair_nonfinite(a.color, a.variance, b.color, b.variance);
+            f(a.color, a.variance);
+            f(b.color, b.variance);
+            return true;
+        });
     };
 }
 
@@ -114,7 +123,8 @@ void add_firefly_configs(std::vector<config>& c) {
 }
 
 void add_peer_configs(std::vector<config>& c) {
-    c.push_back({"input", [](half_buffer<float>&, half_buffer<float>&) {}, {}, true});
+    c.push_back({"input", [] { return halves_fn([](half_buffer<float>&, half_buffer<float>&) { return true; }); },
+                 {}, true});
     c.push_back({"median3x3", peer(&firefly_peers::median3x3), {}, true});
     c.push_back({"cycles_prefilter", peer(&firefly_peers::cycles_prefilter), {}, true});
     c.push_back({"bcd_spikes", peer([](const image_view<float>& col, const image_view<float>& var) {
@@ -311,14 +321,17 @@ std::vector<float> combine(const std::vector<float>& a, const std::vector<float>
 
 void run_halves(benchmark::State& st, const scene_data* s, const config& cfg) {
     work wk;
+    bool ok = true;
+    const halves_fn run = cfg.halves();  // the first iteration is the cold frame
     for (auto _ : st) {
         st.PauseTiming();
         wk.load(*s);
         st.ResumeTiming();
-        cfg.halves(wk.half[0], wk.half[1]);
+        ok = run(wk.half[0], wk.half[1]);
     }
     const std::vector<float> out = combine(wk.col[0], wk.col[1]);
     count_metrics(st, *s, out);
+    st.counters["error"] = ok ? 0 : 1;  // the library said the frame was not cleaned
     const std::vector<float>* halves[2] = {&wk.col[0], &wk.col[1]};
     count_truth(st, *s, halves);
     if (!cfg.downstream) return;
@@ -400,8 +413,11 @@ void buffer_half(const sim::buffers& b, int h, sim::frame& f) {
 }
 
 // Simulated scenes with K buffers (name@kK): the K-buffer estimators read the K buffers, the
-// half-buffer methods their two halves (K/2 buffers each), the same samples.
+// half-buffer methods their two halves (K/2 buffers each), the same samples. At most
+// 1024x540: K full frames per scene cost memory, and the comparison does not need more.
 void add_buffer_scenes(std::map<std::string, scene_data>& all, int w, int h) {
+    w = std::min(w, 1024);
+    h = std::min(h, 540);
     for (const char* base : {"sparse_fireflies", "highlights", "production", "caustics", "interior", "null_k4_spp64"})
         for (int k : {4, 8}) {
             const std::string name = std::string(base) + "@k" + std::to_string(k);
