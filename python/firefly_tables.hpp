@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstddef>
+#include <type_traits>
 #include <utility>
 
 #include <firefly/pipeline.hpp>
@@ -71,7 +72,7 @@ const char* enum_name(E e) noexcept {
 // highlight rule is `highlight_rule`, as `rule` alone says nothing). f(name, get) where
 // get(options) returns a reference to the member.
 template <class F>
-void for_each_option(F&& f) {
+constexpr void for_each_option(F&& f) {
     using O = firefly::detector_options;
     f("alpha", [](O& o) -> auto& { return o.alpha; });
     f("bound_threshold", [](O& o) -> auto& { return o.bound_threshold; });
@@ -93,7 +94,7 @@ void for_each_option(F&& f) {
 
 // Every half_report field: f(name, member pointer).
 template <class F>
-void for_each_half_field(F&& f) {
+constexpr void for_each_half_field(F&& f) {
     using H = firefly::half_report;
     f("pixels", &H::pixels);
     f("valid", &H::valid);
@@ -119,7 +120,7 @@ void for_each_half_field(F&& f) {
 // Every frame_report field but `half` (the two half reports, listed above): f(name, member
 // pointer).
 template <class F>
-void for_each_frame_field(F&& f) {
+constexpr void for_each_frame_field(F&& f) {
     using R = firefly::frame_report;
     f("error", &R::error);
     f("both_outliers", &R::both_outliers);
@@ -127,5 +128,56 @@ void for_each_frame_field(F&& f) {
     f("lambdas_computed", &R::lambdas_computed);
     f("scratch_bytes", &R::scratch_bytes);
 }
+
+// ---------------------------------------------------------------------------------------
+// The option and half-report lists are complete: their counts are checked against the number
+// of members of the library's structs, so a member added there and not here stops the build.
+namespace detail {
+
+struct any_value {
+    template <class T>
+    constexpr operator T() const noexcept;  // never defined: used in unevaluated contexts only
+};
+
+template <class T, class Seq, class = void>
+struct brace_initializable : std::false_type {};
+template <class T, std::size_t... I>
+struct brace_initializable<T, std::index_sequence<I...>, std::void_t<decltype(T{(void(I), any_value{})...})>>
+    : std::true_type {};
+
+// The number of initializers an aggregate takes: its number of members.
+template <class T, std::size_t N = 0>
+constexpr std::size_t aggregate_size() {
+    if constexpr (brace_initializable<T, std::make_index_sequence<N + 1>>::value) {
+        return aggregate_size<T, N + 1>();
+    } else {
+        return N;
+    }
+}
+
+struct counter {
+    std::size_t n = 0;
+    template <class... X>
+    constexpr void operator()(const char*, X&&...) noexcept { ++n; }
+};
+
+template <class List>
+constexpr std::size_t count(List list) {
+    counter c;
+    list(c);
+    return c.n;
+}
+
+}  // namespace detail
+
+static_assert(detail::count([](auto& c) { for_each_option(c); }) ==
+                  detail::aggregate_size<firefly::detector_options>() - 2 +  // highlight, reconstruction
+                      detail::aggregate_size<firefly::highlight_options>() +
+                      detail::aggregate_size<firefly::reconstruct_options>(),
+              "for_each_option must list every detector_options member");
+static_assert(detail::count([](auto& c) { for_each_half_field(c); }) == detail::aggregate_size<firefly::half_report>(),
+              "for_each_half_field must list every half_report member");
+// (frame_report is not counted: brace elision into its half[2] array makes the count
+// meaningless. Its fields are few and listed above.)
 
 }  // namespace firefly_py

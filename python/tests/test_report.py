@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import firefly
-from conftest import arrays_of, make_frame
+from conftest import arrays_of, make_frame, same_bits
 
 HALF_FIELDS = ["pixels", "valid", "ignored", "nonfinite", "negative_variance", "median", "mad", "bound",
                "outliers", "highlights", "consistent", "fireflies", "repaired", "from_other_half", "unreachable", "phase1_rounds",
@@ -118,3 +118,34 @@ def test_float64_frame():
 
 def test_version():
     assert re.fullmatch(r"\d+\.\d+\.\d+", firefly.__version__)
+
+
+def test_detect_reads_only_and_marks_what_process_rebuilds():
+    frame = make_frame(alpha=True)
+    arrays = arrays_of(frame)
+    for arr in arrays.values():
+        arr.flags.writeable = False  # detect() must accept read-only arrays
+    h, w = frame["a_color"].shape[:2]
+    masks = [np.zeros((h, w), np.uint8) for _ in range(2)]
+    found = firefly.Detector().detect(**arrays, a_mask=masks[0], b_mask=masks[1])
+    assert all(same_bits(arrays[k], frame[k]) for k in arrays)
+    copies = {k: v.copy() for k, v in arrays.items()}
+    done_masks = [np.zeros((h, w), np.uint8) for _ in range(2)]
+    done = firefly.Detector().process(**copies, a_mask=done_masks[0], b_mask=done_masks[1])
+    assert found.half[0].fireflies == done.half[0].fireflies >= len(frame["fireflies"])
+    assert found.half[1].highlights == done.half[1].highlights
+    for m, d in zip(masks, done_masks):  # the same pixels, without the "rebuilt from" bit
+        keep = firefly.MASK_FIREFLY | firefly.MASK_HIGHLIGHT | firefly.MASK_NONFINITE | firefly.MASK_CONSISTENT
+        assert same_bits(m & keep, d & keep)
+
+
+def test_a_frame_with_nothing_to_rebuild_from_returns_a_report():
+    frame = make_frame(height=16, width=16)
+    arrays = arrays_of(frame)
+    for k in ("a_color", "b_color"):
+        arrays[k][:] = np.nan
+    rep = firefly.Detector().process(**arrays)
+    assert not rep.ok
+    assert rep.error.code == "no_valid_pixels" and rep.error.message
+    assert rep.half[0].nonfinite == 16 * 16
+    assert rep.as_dict()["error"]["ok"] is False
