@@ -1,19 +1,140 @@
 // firefly: optional parallelism that never changes a bit of the result.
 //
-// The detector splits its work into independent tasks that write disjoint outputs (the two
-// half buffers), so any executor gives the same bytes. Serial by default; threads(n) runs
-// tasks on std::threads; wrap your own scheduler (TBB, a renderer's job system) with the
-// constructor taking a parallel-for.
+// The detector splits its work into independent tasks that write disjoint outputs, so any
+// executor gives the same bytes. Serial by default; threads(n) runs tasks on a persistent
+// pool of n - 1 worker threads plus the calling thread; wrap your own scheduler (TBB, a
+// renderer's job system) with the constructor taking a parallel-for.
 #pragma once
 
 #include <algorithm>
 #include <atomic>
+#include <condition_variable>
 #include <cstddef>
+#include <cstdint>
 #include <functional>
+#include <memory>
+#include <mutex>
 #include <thread>
 #include <vector>
+#if defined(__cpp_exceptions)
+#include <system_error>
+#endif
 
 namespace firefly {
+
+namespace detail {
+
+// n - 1 worker threads, started on the first run() and reused by every later one; they sleep
+// on a condition variable between runs (no spinning). One run at a time: a run() that finds
+// the pool busy (another thread's run, or a task calling run() on its own pool) executes its
+// tasks serially on the calling thread instead of waiting, so it can neither deadlock nor
+// change a result. The destructor wakes and joins the workers; it must not run on one of
+// them (do not let a task drop the last copy of its own executor).
+//
+// Without exceptions, a failure to start a std::thread (std::system_error) cannot be caught
+// and terminates the program, as any std::thread use does; with exceptions the pool keeps the
+// workers it could start (none: the calling thread does all the work).
+class thread_pool {
+public:
+    using task = std::function<void(std::size_t)>;
+
+    explicit thread_pool(unsigned threads) : wanted_(threads > 1 ? threads - 1 : 0) {}
+    thread_pool(const thread_pool&) = delete;
+    thread_pool& operator=(const thread_pool&) = delete;
+
+    ~thread_pool() {
+        {
+            std::lock_guard<std::mutex> l(m_);
+            stop_ = true;
+        }
+        wake_.notify_all();
+        for (auto& th : workers_) th.join();
+    }
+
+    // Calls t(i) for every i in [0, count) once and returns when all calls have finished.
+    void run(std::size_t count, const task& t) {
+        if (count == 0) return;
+        if (count == 1 || in_use_.exchange(true, std::memory_order_acquire)) {
+            for (std::size_t i = 0; i < count; ++i) t(i);
+            return;
+        }
+        start();
+        {
+            std::lock_guard<std::mutex> l(m_);
+            job_ = &t;
+            count_ = count;
+            next_.store(0, std::memory_order_relaxed);
+            ++generation_;
+        }
+        wake_.notify_all();
+        work(t, count);
+        {
+            // No worker joins once job_ is cleared; wait for those that did.
+            std::unique_lock<std::mutex> l(m_);
+            job_ = nullptr;
+            done_.wait(l, [this] { return busy_ == 0; });
+        }
+        in_use_.store(false, std::memory_order_release);
+    }
+
+    // Worker threads started so far (0 before the first run with more than one task).
+    std::size_t workers() const noexcept { return started_.load(std::memory_order_relaxed); }
+
+private:
+    void work(const task& t, std::size_t count) {
+        for (std::size_t i; (i = next_.fetch_add(1, std::memory_order_relaxed)) < count;) t(i);
+    }
+
+    // Called with in_use_ held, so by one thread at a time.
+    void start() {
+        if (!workers_.empty() || wanted_ == 0 || tried_) return;
+        tried_ = true;
+        workers_.reserve(wanted_);
+#if defined(__cpp_exceptions)
+        try {
+            for (unsigned i = 0; i < wanted_; ++i) workers_.emplace_back([this] { loop(); });
+        } catch (const std::system_error&) {
+            // Keep the workers that started; the caller's thread covers the rest.
+        }
+#else
+        for (unsigned i = 0; i < wanted_; ++i) workers_.emplace_back([this] { loop(); });
+#endif
+        started_.store(workers_.size(), std::memory_order_relaxed);
+    }
+
+    void loop() {
+        std::uint64_t seen = 0;
+        std::unique_lock<std::mutex> l(m_);
+        for (;;) {
+            wake_.wait(l, [&] { return stop_ || (job_ != nullptr && generation_ != seen); });
+            if (stop_) return;
+            seen = generation_;
+            const task* t = job_;
+            const std::size_t count = count_;
+            ++busy_;
+            l.unlock();
+            work(*t, count);
+            l.lock();
+            if (--busy_ == 0) done_.notify_all();
+        }
+    }
+
+    const unsigned wanted_;
+    std::vector<std::thread> workers_;
+    std::atomic<std::size_t> started_{0};
+    bool tried_ = false;
+    std::atomic<bool> in_use_{false};
+    std::atomic<std::size_t> next_{0};
+    std::mutex m_;                     // guards everything below
+    std::condition_variable wake_, done_;
+    const task* job_ = nullptr;
+    std::size_t count_ = 0;
+    std::uint64_t generation_ = 0;
+    unsigned busy_ = 0;                // workers inside the current job
+    bool stop_ = false;
+};
+
+}  // namespace detail
 
 class executor {
 public:
@@ -26,21 +147,15 @@ public:
     explicit executor(parallel_for f) : for_(std::move(f)) {}
 
     static executor serial() { return executor(); }
-    // Up to n threads per call (the caller's thread is one of them); n <= 1 is serial.
+    // Up to n threads per run (the caller's thread is one of them); n <= 1 is serial. The
+    // n - 1 workers start on the first run and are shared by every copy of this executor;
+    // they are joined when the last copy is destroyed. Concurrent run() calls on copies of one
+    // executor do not wait for each other: the one that finds the pool busy runs its tasks on
+    // its own thread. Use one threads(n) executor per rendering thread for separate pools.
     static executor threads(unsigned n) {
         if (n <= 1) return executor();
-        return executor([n](std::size_t count, const task& t) {
-            std::atomic<std::size_t> next{0};
-            auto worker = [&] {
-                for (std::size_t i; (i = next.fetch_add(1)) < count;) t(i);
-            };
-            const std::size_t extra = std::min<std::size_t>(n, count) - (count > 0 ? 1 : 0);
-            std::vector<std::thread> pool;
-            pool.reserve(extra);
-            for (std::size_t i = 0; i < extra; ++i) pool.emplace_back(worker);
-            worker();
-            for (auto& th : pool) th.join();
-        });
+        auto pool = std::make_shared<detail::thread_pool>(n);
+        return executor([pool](std::size_t count, const task& t) { pool->run(count, t); });
     }
 
     void run(std::size_t count, const task& t) const {

@@ -1,0 +1,140 @@
+// The persistent pool behind executor::threads(n): every index once, the same threads reused,
+// concurrent callers, a clean shutdown, and detector outputs identical to serial.
+#include <firefly/firefly.hpp>
+#include <firefly/sim/scene.hpp>
+
+#include <atomic>
+#include <cstring>
+#include <mutex>
+#include <set>
+#include <thread>
+#include <vector>
+
+#include "catch.hpp"
+
+using namespace firefly;
+
+namespace {
+
+// Runs count tasks and checks each index ran exactly once.
+bool each_once(const executor& e, std::size_t count) {
+    std::vector<std::atomic<int>> hits(count);
+    for (auto& h : hits) h.store(0);
+    e.run(count, [&](std::size_t i) { hits[i].fetch_add(1); });
+    for (auto& h : hits)
+        if (h.load() != 1) return false;
+    return true;
+}
+
+struct cleaned {
+    sim::frame f;
+    std::vector<std::uint8_t> mask[2];
+    frame_report r;
+};
+
+cleaned clean_with(const sim::scene& s, executor e) {
+    cleaned c{sim::simulate(s), {}, {}};
+    half_buffer<float> h[2];
+    image_view<std::uint8_t> m[2];
+    for (int i = 0; i < 2; ++i) {
+        h[i].color = *make_image_view(c.f.color[i].data(), c.f.width, c.f.height, 3);
+        h[i].variance = *make_image_view(c.f.variance[i].data(), c.f.width, c.f.height, 3);
+        c.mask[i].assign(c.f.pixels(), 0);
+        m[i] = *make_image_view(c.mask[i].data(), c.f.width, c.f.height, 1);
+    }
+    detector d(detector_options{}, std::move(e));
+    c.r = d.process(h[0], h[1], m[0], m[1]);
+    return c;
+}
+
+bool same_bytes(const cleaned& a, const cleaned& b) {
+    for (int i = 0; i < 2; ++i) {
+        if (std::memcmp(a.f.color[i].data(), b.f.color[i].data(), a.f.color[i].size() * 4) != 0) return false;
+        if (std::memcmp(a.f.variance[i].data(), b.f.variance[i].data(), a.f.variance[i].size() * 4) != 0) return false;
+        if (a.mask[i] != b.mask[i]) return false;
+    }
+    return true;
+}
+
+}  // namespace
+
+TEST_CASE("threads(n) runs every index exactly once", "[parallel]") {
+    for (unsigned n : {1u, 2u, 3u, 8u}) {
+        const executor e = executor::threads(n);
+        for (std::size_t count : {0, 1, 2, 3, 7, 64, 1000}) CHECK(each_once(e, count));
+    }
+}
+
+TEST_CASE("threads(n) reuses the same threads across calls", "[parallel]") {
+    for (unsigned n : {2u, 4u}) {
+        const executor e = executor::threads(n);
+        std::mutex m;
+        std::set<std::thread::id> ids;
+        for (int call = 0; call < 100; ++call) {
+            e.run(16, [&](std::size_t) {
+                // A little work so that the workers get a share.
+                volatile double x = 0;
+                for (int k = 0; k < 2000; ++k) x = x + k;
+                std::lock_guard<std::mutex> l(m);
+                ids.insert(std::this_thread::get_id());
+            });
+        }
+        CHECK(ids.size() <= n);
+        CHECK(ids.count(std::this_thread::get_id()) == 1);  // the caller takes part
+    }
+}
+
+TEST_CASE("copies share one pool and outlive the original", "[parallel]") {
+    executor copy;
+    {
+        const executor e = executor::threads(3);
+        CHECK(each_once(e, 50));
+        copy = e;
+    }
+    CHECK(!copy.is_serial());
+    CHECK(each_once(copy, 50));
+}
+
+TEST_CASE("run() from two threads at once on one executor", "[parallel]") {
+    const executor e = executor::threads(2);
+    std::atomic<bool> ok[2] = {{true}, {true}};
+    auto caller = [&](int c) {
+        for (int k = 0; k < 200; ++k)
+            if (!each_once(e, 37)) ok[c] = false;
+    };
+    std::thread a(caller, 0), b(caller, 1);
+    a.join();
+    b.join();
+    CHECK(ok[0].load());
+    CHECK(ok[1].load());
+}
+
+TEST_CASE("a task may call run() on its own executor", "[parallel]") {
+    const executor e = executor::threads(2);
+    std::atomic<int> inner{0};
+    e.run(4, [&](std::size_t) { e.run(5, [&](std::size_t) { inner.fetch_add(1); }); });
+    CHECK(inner.load() == 20);
+}
+
+TEST_CASE("the pool is destroyed cleanly, idle or never used", "[parallel]") {
+    for (int k = 0; k < 20; ++k) {
+        const executor unused = executor::threads(4);
+        const executor used = executor::threads(4);
+        CHECK(each_once(used, 9));
+        std::this_thread::sleep_for(std::chrono::microseconds(100));  // workers back asleep
+    }
+}
+
+TEST_CASE("the detector gives the same bytes for serial, threads(2) and threads(4)", "[parallel][pipeline]") {
+    for (const char* name : {"caustics", "failed_bucket", "production"}) {
+        const sim::scene s = sim::named_scene(name, 192, 128, 11);
+        const cleaned serial = clean_with(s, executor::serial());
+        REQUIRE(serial.r.half[0].fireflies + serial.r.half[1].fireflies > 0);
+        for (unsigned n : {2u, 4u}) {
+            const cleaned threaded = clean_with(s, executor::threads(n));
+            CHECK(same_bytes(serial, threaded));
+            CHECK(threaded.r.half[0].fireflies == serial.r.half[0].fireflies);
+            CHECK(threaded.r.half[1].repaired == serial.r.half[1].repaired);
+        }
+    }
+}
