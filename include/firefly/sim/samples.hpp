@@ -4,7 +4,9 @@
 // has mean 1 and relative standard deviation s (gamma: shape 1/s^2; lognormal: sigma^2 =
 // log(1 + s^2)). What is drawn is the sample mean of m samples and their sum of squared
 // deviations, relative to mu:
-//   normal     exact: the mean is normal, the sum of squares chi-square (independent of it);
+//   normal     the mean is normal (exact), the sum of squares chi-square, independent of it
+//              (exact below 30 degrees of freedom, above by the Wilson-Hilferty cube, whose
+//              quantiles are within 1e-3 of the spread there);
 //   gamma,     m <= 64, or whenever the approximation below would be poor: every sample is
 //   lognormal  drawn (exact);
 //              m > 64: the mean from its own law (gamma: Wilson-Hilferty cube of Gamma(m/s^2);
@@ -112,13 +114,36 @@ inline sample_moments approx_samples(counter_rng& r, distribution d, double s, s
     return out;
 }
 
-// The mean and sum of squared deviations of m ordinary samples, relative to mu.
-inline sample_moments draw_samples(counter_rng& r, distribution d, double s, std::uint64_t m) noexcept {
+// Constants of the normal law's draw for one sample count (most pixels of a buffer share it).
+struct normal_constants {
+    std::uint64_t m = 0;
+    double inv_sqrt_m = 0, wh_c = 0, wh_sqrt_c = 0;
+    explicit normal_constants(std::uint64_t count = 0) noexcept : m(count) {
+        if (m == 0) return;
+        inv_sqrt_m = 1.0 / std::sqrt(static_cast<double>(m));
+        const double half_k = 0.5 * (static_cast<double>(m) - 1.0);  // chi-square(m - 1) = 2 Gamma((m-1)/2)
+        wh_c = half_k > 0 ? 1.0 / (9.0 * half_k) : 0.0;
+        wh_sqrt_c = std::sqrt(wh_c);
+    }
+};
+
+// The mean and sum of squared deviations of m ordinary samples, relative to mu. `nc` are the
+// normal law's constants when computed for this m (else computed here).
+inline sample_moments draw_samples(counter_rng& r, distribution d, double s, std::uint64_t m,
+                                   const normal_constants* nc = nullptr) noexcept {
     if (m == 0) return {0.0, 0.0};
     if (d == distribution::normal || !(s > 0)) {
+        const normal_constants local = nc && nc->m == m ? normal_constants() : normal_constants(m);
+        const normal_constants& k = nc && nc->m == m ? *nc : local;
         const double dm = static_cast<double>(m);
-        const double gbar = r.normal() / std::sqrt(dm);
-        const double s2 = m > 1 ? r.chi2_over_k(dm - 1.0) : 0.0;
+        const double gbar = r.normal() * k.inv_sqrt_m;
+        double s2 = 0.0;  // chi-square(m - 1) / (m - 1): exact below 30 degrees of freedom, else
+        if (m > 1 && m - 1 < 30) {  // the Wilson-Hilferty cube
+            s2 = r.chi2_over_k(dm - 1.0);
+        } else if (m > 1) {
+            const double t = 1.0 - k.wh_c + r.normal() * k.wh_sqrt_c;
+            s2 = t > 0 ? t * t * t : 0.0;
+        }
         return {1.0 + s * gbar, s * s * s2 * (dm - 1.0)};
     }
     if (m <= exact_sample_limit) return loop_samples(r, d, s, m);

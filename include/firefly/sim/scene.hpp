@@ -139,7 +139,7 @@ struct row_events {
 // One pixel of one buffer: colour and variance of the mean, and the firefly energy added.
 // Returns `fireflies` when the fireflies effect hit the pixel.
 inline std::uint32_t simulate_pixel(const scene& sc, const pixel_model& p, std::size_t i, int b, std::uint64_t n,
-                                    const hits* ff_ratio, buffers& out) {
+                                    const hits* ff_ratio, const normal_constants& nc, buffers& out) {
     hits h;
     std::uint32_t touched = 0;
     if (ff_ratio) {
@@ -154,7 +154,7 @@ inline std::uint32_t simulate_pixel(const scene& sc, const pixel_model& p, std::
     }
     const std::uint64_t k = std::min(h.count, n), m = n - k;
     counter_rng base(sc.seed, base_noise, i, static_cast<std::uint64_t>(b));
-    const sample_moments o = draw_samples(base, sc.samples, p.s, m);
+    const sample_moments o = draw_samples(base, sc.samples, p.s, m, &nc);
     const double dm = static_cast<double>(m), dk = static_cast<double>(k), dn = static_cast<double>(n);
     const double to_var_mean = p.cov * p.cov / ((dn - 1) * dn);  // m2 -> variance of the mean
     for (int c = 0; c < 3; ++c) {
@@ -228,6 +228,8 @@ inline buffers simulate_buffers(const scene& sc, int k) {
     detail::allocate(sc, k, f);
     const detail::layout lay(sc);
     std::vector<detail::row_events> ev(static_cast<std::size_t>(k));
+    std::vector<detail::normal_constants> nc;
+    for (int b = 0; b < k; ++b) nc.emplace_back(static_cast<std::uint64_t>(f.spp[b]));
     for (int y = 0; y < f.height; ++y) {
         for (int b = 0; b < k; ++b)
             ev[b].draw(sc, lay.firefly_probability(), y, b, f.width, static_cast<std::uint64_t>(f.spp[b]));
@@ -242,7 +244,7 @@ inline buffers simulate_buffers(const scene& sc, int k) {
                 const auto* hit = detail::row_events::at(ev[b].ff, ev[b].next_ff, x);
                 if (p.cov > 0)
                     touched |= detail::simulate_pixel(sc, p, i, b, static_cast<std::uint64_t>(f.spp[b]),
-                                                      hit ? &hit->ratio : nullptr, f);
+                                                      hit ? &hit->ratio : nullptr, nc[b], f);
                 touched |= detail::damage_pixel(p, x, i, b, ev[b], f);
             }
             if (!f.touched.empty()) f.touched[i] = touched;
