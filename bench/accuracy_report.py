@@ -92,6 +92,61 @@ def scene_table(sc, rs):
     print()
 
 
+def downstream_table(rows):
+    """Scenes down, methods across: relMSE after NL-means (the prefilter's own relMSE below it
+    is in the per-scene tables)."""
+    cols = ["input", "firefly", "firefly_paper", "cycles_prefilter", "bcd_spikes", "median3x3", "nrd_clamp", "clamp4"]
+    at = {(r["scene"], r["method"]): r for r in rows}
+    scenes = sorted({r["scene"] for r in rows if r["ds"] is not None}, key=lambda s: (s in REAL, s))
+    if not scenes:
+        return
+    print("relMSE after NL-means at each method's best strength (`input`: the denoiser alone); "
+          "the lowest of each row in bold.\n")
+    print("| scene | " + " | ".join("denoiser alone" if c == "input" else c for c in cols) + " |")
+    print("|---" + "|---:" * len(cols) + "|")
+    for sc in scenes:
+        vals = [at.get((sc, c), {}).get("ds") for c in cols]
+        low = min(v for v in vals if v is not None)
+        cells = ["-" if v is None else (f"**{v:.4g}**" if v == low else f"{v:.4g}") for v in vals]
+        print(f"| {sc} | " + " | ".join(cells) + " |")
+    print()
+
+
+def buffers_table(rows):
+    """Per K-buffer scene: the mean, the best median of means, the best G-MoN, and the
+    half-buffer methods on the same samples."""
+    at = defaultdict(dict)
+    for r in rows:
+        at[r["scene"]][r["method"]] = r
+    scenes = [sc for sc, ms in at.items() if any(m.startswith("gmon_k") and "_k2_" not in m for m in ms)]
+    if not scenes:
+        return
+    print("| scene | mean of the K | best median of means | best G-MoN | firefly (two halves) | firefly_paper | "
+          "cycles_prefilter |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+
+    def best(ms, prefix):
+        c = [r for m, r in ms.items() if m.startswith(prefix)]
+        if not c:
+            return "-"
+        r = min(c, key=lambda r: r["relmse"])
+        hl = "" if r["highlight_kept"] is None else f", hl {r['highlight_kept']:.2f}"
+        return f"{r['relmse']:.4g} ({r['method'].split('_', 1)[1]}{hl})"
+
+    def one(ms, m):
+        r = ms.get(m)
+        if not r:
+            return "-"
+        return f"{r['relmse']:.4g}" + ("" if r["highlight_kept"] is None else f" (hl {r['highlight_kept']:.2f})")
+
+    for sc in sorted(scenes, key=lambda s: (s in REAL, s)):
+        ms = at[sc]
+        mean = [r for m, r in ms.items() if m.startswith("mean_k")]
+        print(f"| {sc} | {mean[0]['relmse']:.4g} | {best(ms, 'mon_k')} | {best(ms, 'gmon_k')} | "
+              f"{one(ms, 'firefly')} | {one(ms, 'firefly_paper')} | {one(ms, 'cycles_prefilter')} |")
+    print()
+
+
 def summarize(sim):
     by = defaultdict(list)
     for r in sim:
@@ -421,6 +476,12 @@ def main():
     print("Over the simulated half-buffer scenes (the `@k` scenes, which only firefly, the paper and the peers "
           "run, and the K-buffer estimators, which on two halves are the mean, are left out):\n")
     summary_table(summary)
+    print("## After a real denoiser\n")
+    downstream_table(rows)
+    print("## K buffers\n")
+    print("relMSE on the scenes with K > 2 buffers (hl: highlights kept, simulated scenes); the "
+          "half-buffer methods run on two halves of the same samples.\n")
+    buffers_table(rows)
     print("## Per scene\n")
     for sc in sorted({r["scene"] for r in rows}, key=lambda s: (s in REAL, s)):
         scene_table(sc, [r for r in rows if r["scene"] == sc])
