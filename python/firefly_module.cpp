@@ -323,9 +323,21 @@ const char* detect_doc =
     "Like process(), but writes only the masks (what process() would rebuild is marked MASK_FIREFLY\n"
     "or MASK_NONFINITE) and the report; the half buffers are only read and may be read-only.";
 
+// process() and detect(): the same arguments.
+template <bool in_place>
+void def_run(py::class_<py_detector>& c, const char* name, const char* doc) {
+    c.def(
+        name,
+        [](py_detector& d, py::object ac, py::object av, py::object bc, py::object bv, py::object aa, py::object ba,
+           py::object am, py::object bm) { return run<in_place>(d, process_args{ac, av, bc, bv, aa, ba, am, bm}); },
+        doc, py::arg("a_color"), py::arg("a_variance"), py::arg("b_color"), py::arg("b_variance"),
+        py::arg("a_alpha") = py::none(), py::arg("b_alpha") = py::none(), py::arg("a_mask") = py::none(),
+        py::arg("b_mask") = py::none());
+}
+
 void bind_detector(py::module_& m) {
-    py::class_<py_detector>(m, "Detector", detector_doc().c_str())
-        .def(py::init([](int threads, const py::kwargs& kw) {
+    py::class_<py_detector> c(m, "Detector", detector_doc().c_str());
+    c.def(py::init([](int threads, const py::kwargs& kw) {
                  if (threads < 1) throw py::value_error("threads must be >= 1");
                  return new py_detector(options_from_kwargs(kw), threads);
              }),
@@ -333,20 +345,15 @@ void bind_detector(py::module_& m) {
         .def_property_readonly("options", [](const py_detector& d) { return options_to_dict(d.det.options()); },
                                "The options, as a dict of keyword: value.")
         .def_property_readonly("threads", [](const py_detector& d) { return d.threads; })
-        .def(
-            "process",
-            [](py_detector& d, py::object ac, py::object av, py::object bc, py::object bv, py::object aa, py::object ba,
-               py::object am, py::object bm) { return run<true>(d, process_args{ac, av, bc, bv, aa, ba, am, bm}); },
-            process_doc, py::arg("a_color"), py::arg("a_variance"), py::arg("b_color"), py::arg("b_variance"),
-            py::arg("a_alpha") = py::none(), py::arg("b_alpha") = py::none(), py::arg("a_mask") = py::none(),
-            py::arg("b_mask") = py::none())
-        .def(
-            "detect",
-            [](py_detector& d, py::object ac, py::object av, py::object bc, py::object bv, py::object aa, py::object ba,
-               py::object am, py::object bm) { return run<false>(d, process_args{ac, av, bc, bv, aa, ba, am, bm}); },
-            detect_doc, py::arg("a_color"), py::arg("a_variance"), py::arg("b_color"), py::arg("b_variance"),
-            py::arg("a_alpha") = py::none(), py::arg("b_alpha") = py::none(), py::arg("a_mask") = py::none(),
-            py::arg("b_mask") = py::none());
+        .def("__repr__",
+             [](const py_detector& d) {
+                 std::string s = "Detector(threads=" + std::to_string(d.threads);
+                 for (auto item : options_to_dict(d.det.options()))
+                     s += ", " + item.first.cast<std::string>() + "=" + py::repr(item.second).cast<std::string>();
+                 return s + ")";
+             });
+    def_run<true>(c, "process", process_doc);
+    def_run<false>(c, "detect", detect_doc);
 }
 
 }  // namespace

@@ -93,6 +93,7 @@ def test_options_round_trip():
     det = firefly.Detector(threads=2, **changed)
     assert det.options == changed and det.threads == 2
     assert firefly.Detector(**det.options).options == changed
+    assert eval(repr(det), {"Detector": firefly.Detector}).options == changed
     for name in defaults:
         assert name + "=" in firefly.Detector.__doc__
 

@@ -24,7 +24,8 @@ def test_gil_is_released_during_process():
     def worker():
         det = firefly.Detector()
         entered.set()
-        det.process(**big)  # the GIL is released only inside
+        for _ in range(3):  # a long window (~0.3 s) for this thread to be scheduled in
+            det.process(**big)  # the GIL is released only inside
         state["done"] = True
 
     old = sys.getswitchinterval()
