@@ -78,3 +78,13 @@ def test_install_puts_an_importable_module_under_the_prefix(tmp_path):
                           env=env, cwd=tmp_path, capture_output=True, text=True, check=True)
     assert done.stdout.split()[0] == str(installed[0])
     assert done.stdout.split()[1] == firefly.__version__
+
+
+def test_readme_lists_every_option():
+    path = os.environ.get("FIREFLY_README")
+    if not path:
+        pytest.skip("FIREFLY_README is not set (run the tests through ctest)")
+    text = open(path, encoding="utf-8").read()
+    section = text.split("\n## Python\n", 1)[1].split("\n## ", 1)[0]
+    listed = re.search(r"flattened \((.*?)\), enums", section, re.S).group(1)
+    assert set(re.findall(r"`(\w+)`", listed)) == set(firefly.Detector().options)
