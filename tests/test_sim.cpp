@@ -569,3 +569,28 @@ TEST_CASE("per-sample laws: the large-count approximation matches drawing every 
             }
         }
 }
+
+TEST_CASE("the simulator's normal numbers follow the normal law", "[sim][samples]") {
+    // Equiprobable bins from the normal quantile; chi-square over 100 bins, and the tails.
+    sim::detail::counter_rng r(3, 1, 4, 1);
+    const int n = 1000000, bins = 100;
+    std::vector<double> edge;
+    for (int b = 1; b < bins; ++b) edge.push_back(-normal_upper_quantile(static_cast<double>(b) / bins));
+    std::vector<long> count(bins, 0);
+    double sum = 0, sq = 0;
+    long beyond3 = 0;
+    for (int k = 0; k < n; ++k) {
+        const double x = r.normal();
+        sum += x;
+        sq += x * x;
+        beyond3 += std::fabs(x) > 3.0;
+        ++count[static_cast<std::size_t>(std::upper_bound(edge.begin(), edge.end(), x) - edge.begin())];
+    }
+    double chi2 = 0;
+    const double want = static_cast<double>(n) / bins;
+    for (const long c : count) chi2 += (static_cast<double>(c) - want) * (static_cast<double>(c) - want) / want;
+    CHECK(chi2 < 150.0);  // df 99: exceeded with probability ~0.1%
+    CHECK(sum / n == Approx(0.0).margin(0.005));
+    CHECK(sq / n == Approx(1.0).epsilon(0.005));
+    CHECK(static_cast<double>(beyond3) / n == Approx(0.0026998).epsilon(0.06));  // 2 P(Z > 3), +-3 s.e.
+}

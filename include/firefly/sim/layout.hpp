@@ -23,6 +23,10 @@ struct capsule {  // the points within r of the segment (x0, y0)-(x1, y1), in pi
         const double t = len2 > 0 ? std::clamp(((x - x0) * dx + (y - y0) * dy) / len2, 0.0, 1.0) : 0.0;
         return std::hypot(x - (x0 + t * dx), y - (y0 + t * dy));
     }
+    bool near(double x, double y) const noexcept {  // within the bounding box
+        return x >= std::min(x0, x1) - r && x <= std::max(x0, x1) + r && y >= std::min(y0, y1) - r &&
+               y <= std::max(y0, y1) + r;
+    }
 };
 
 struct pixel_model {
@@ -60,6 +64,9 @@ public:
                                                : rate_to_probability(sc.firefly_pixel_rate, n);
         if (fx_ & (highlights | wide_highlight)) place_spots();
         if (fx_ & caustics) place_caustics();
+        if (fx_ & log_gradient)
+            for (int x = 0; x < w_; ++x)
+                log_ramp_.push_back(0.02 * std::pow(1000.0, w_ > 1 ? static_cast<double>(x) / (w_ - 1) : 0.5));
         const double m = std::min(w_, h_);
         region_ = {sc.region_x0 * w_, sc.region_y0 * h_, sc.region_x1 * w_, sc.region_y1 * h_, sc.region_radius * m};
         const int side = static_cast<int>(std::lround(sc.bucket_size * w_));
@@ -87,7 +94,7 @@ public:
         double b = sc_.base, s = sc_.noise;
         const double tx = w_ > 1 ? static_cast<double>(x) / (w_ - 1) : 0.5;
         if (fx_ & gradient) scale(p, gradient, b, 0.25 + 1.5 * tx);
-        if (fx_ & log_gradient) scale(p, log_gradient, b, 0.02 * std::pow(1000.0, tx));
+        if (fx_ & log_gradient) scale(p, log_gradient, b, log_ramp_[static_cast<std::size_t>(x)]);
         if (fx_ & fine_detail) {
             if (x % 16 == 5 || y % 24 == 7) scale(p, fine_detail, b, 6.0);  // thin lines
             if (x >= w_ / 2 && x < w_ / 2 + 32 && y >= h_ / 4 && y < h_ / 4 + 32 && ((x + y) & 1))
@@ -96,7 +103,7 @@ public:
         if (fx_ & varying_noise)
             scale(p, varying_noise, s, 0.25 + 1.75 * (h_ > 1 ? static_cast<double>(y) / (h_ - 1) : 0.5));
         if (fx_ & caustics) caustic(p, x, y, b);
-        if ((fx_ & bright_region) && region_.distance(x + 0.5, y + 0.5) <= region_.r) {
+        if ((fx_ & bright_region) && region_.near(x + 0.5, y + 0.5) && region_.distance(x + 0.5, y + 0.5) <= region_.r) {
             p.touched |= bright_region;
             p.highlight = true;
             b = sc_.region_radiance * sc_.base;
@@ -141,7 +148,8 @@ private:
     void caustic(pixel_model& p, int x, int y, double& b) const noexcept {
         double c = 0;  // 1 in a caustic's core, falling to 0 at its rim
         for (const capsule& k : caustics_)
-            c = std::max(c, std::clamp((1.0 - k.distance(x + 0.5, y + 0.5) / k.r) / 0.4, 0.0, 1.0));
+            if (k.near(x + 0.5, y + 0.5))
+                c = std::max(c, std::clamp((1.0 - k.distance(x + 0.5, y + 0.5) / k.r) / 0.4, 0.0, 1.0));
         if (c <= 0) return;
         p.touched |= caustics;
         b *= 1.0 + (sc_.caustic_radiance - 1.0) * c;
@@ -197,6 +205,7 @@ private:
     double mean_ratio_ = mean_ratio(sc_);
     std::vector<std::uint8_t> spots_;  // highlights | wide_highlight bits (both fit a byte)
     std::vector<capsule> caustics_;
+    std::vector<double> log_ramp_;  // log_gradient factor per column
     capsule region_{};
     int bx_ = 0, by_ = 0, bx1_ = 0, by1_ = 0;
 };
