@@ -12,6 +12,7 @@
 #include "bound.hpp"
 #include "esd.hpp"
 #include "highlight.hpp"
+#include "local_test.hpp"
 #include "kernel.hpp"
 #include "reconstruct.hpp"
 #include "cross_half.hpp"

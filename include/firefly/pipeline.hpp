@@ -34,6 +34,7 @@
 #include "esd.hpp"
 #include "highlight.hpp"
 #include "image_view.hpp"
+#include "local_test.hpp"
 #include "parallel.hpp"
 #include "reconstruct.hpp"
 #include "statistics.hpp"
@@ -70,6 +71,10 @@ struct detector_options {
     lambda_method lambdas = lambda_method::exact;
     highlight_options highlight{};
     reconstruct_options reconstruction{};
+    bool local_test = true;             // add the local, brightness-invariant test's flags
+                                        // (local_test.hpp) to the global ESD's outliers
+    local_test_options local{};         // its variance_scale multiplies the frame's own
+                                        // calibration (leave 1 unless the convention is known)
     rebuild_source rebuild = rebuild_source::other_half;
     bool blend_spatial = true;          // other_half: blend in the spatial estimate (false:
                                         // the other half's value alone)
@@ -90,6 +95,7 @@ inline status check_options(const detector_options& o) noexcept {
         !(o.highlight.min_excess_z >= 0.0) || !(o.highlight.cluster_relative_error >= 0.0))
         return status{errc::invalid_argument,
                       "highlight: max_ratio >= 1, max_relative_error >= 0, min_excess_z >= 0"};
+    if (status st = check_local_test_options(o.local); !st.ok()) return st;
     return check_reconstruct_options(o.reconstruction);
 }
 
@@ -114,7 +120,8 @@ struct half_report {
     double median = 0.0;                // of the standard deviations
     double mad = 0.0;
     std::size_t bound = 0;              // modified Z-score upper bound
-    std::size_t outliers = 0;           // generalized ESD outliers
+    std::size_t outliers = 0;           // generalized ESD outliers and local flags
+    std::size_t local = 0;              // of those, flagged by the local test only
     std::size_t highlights = 0;         // outliers kept (outlier in both halves)
     std::size_t consistent = 0;         // outliers kept (within the other half's noise)
     std::size_t fireflies = 0;          // outliers to rebuild (rebuilt unless reconstruct = false)
@@ -138,9 +145,9 @@ struct [[nodiscard]] frame_report {
     std::size_t lambdas_computed = 0;   // lambda cache misses in this frame
     std::size_t scratch_bytes = 0;      // detector memory after this frame
     // Wall time of each stage, milliseconds (both halves): standard deviations, bound and
-    // candidates; the ESD decisions; the highlight check; the other half's estimates; the
-    // writes, spatial reconstruction and masks.
-    enum stage { candidates, esd, highlights, other_half, rebuild, stages };
+    // candidates; the ESD decisions; the calibration and the local test; the highlight
+    // check; the other half's estimates; the writes, spatial reconstruction and masks.
+    enum stage { candidates, esd, local, highlights, other_half, rebuild, stages };
     double stage_ms[stages] = {};
 };
 
@@ -177,7 +184,7 @@ public:
     const std::shared_ptr<lambda_cache>& shared_lambdas() const noexcept { return cache_; }
 
     std::size_t scratch_bytes() const noexcept {
-        std::size_t n = cache_->bytes();
+        std::size_t n = cache_->bytes() + local_scratch_.bytes();
         for (const auto& h : halves_)
             n += h.sd.capacity() * sizeof(float) + h.label.capacity() +
                  h.hist.bytes() + h.select_f.capacity() * sizeof(float) +
@@ -250,6 +257,7 @@ private:
                      const image_view<std::uint8_t>& mask_a, const image_view<std::uint8_t>& mask_b, bool clean) {
         frame_report rep;
         if (status st = check_inputs(a, b, mask_a, mask_b); !st.ok()) return fail(rep, st);
+        frame_height_ = a.color.height();
         const half_buffer<C, V, A>* hb[2] = {&a, &b};
         const image_view<std::uint8_t>* masks[2] = {&mask_a, &mask_b};
         // Stage 1 (parallel): standard deviations, bound, ESD candidates, per half.
@@ -264,7 +272,10 @@ private:
             rep.lambdas_computed = cache_->computed() - before;
         }
         clock.lap(frame_report::esd);
-        // Stage 3: the highlight check across halves.
+        // Stage 3: the variance calibration, the local test, the highlight check.
+        rep.variance_calibration = calibrate(a, b);
+        if (options_.local_test) add_local_flags(a, b, rep);
+        clock.lap(frame_report::local);
         check_highlights(a, b, rep);
         exec_.run(2, [&](std::size_t h) { mark_fixes(halves_[h], rep.half[h]); });
         clock.lap(frame_report::highlights);
@@ -463,10 +474,6 @@ private:
         }
         single |= rep.half[1].outliers > pairs_.size();
         rep.both_outliers = pairs_.size();
-        // Calibrated whenever anything is decided or rebuilt, so no decision depends on
-        // whether an unrelated pixel elsewhere is an outlier.
-        if (pairs_.empty() && !single && rep.half[0].nonfinite + rep.half[1].nonfinite == 0) return;
-        rep.variance_calibration = calibrate(a, b);
         decide_pairs(a, b, rep.variance_calibration);
         if (single) decide_singles(a, b, rep);
     }
@@ -488,8 +495,8 @@ private:
             // A firefly may sit on top of a highlight in one half: that half then exceeds the
             // other by far more than the other's noise. It is rebuilt, and the other half is
             // judged on its own (as if both halves held its value).
-            const bool a_over = ho.min_excess_z > 0 && exceeds_other_half(ho, la, lb, vb, calibration);
-            const bool b_over = ho.min_excess_z > 0 && exceeds_other_half(ho, lb, la, va, calibration);
+            const bool a_over = ho.min_excess_z > 0 && exceeds_other_half(ho, la, lb, noise_floor(x, y, vb, lb, calibration), calibration);
+            const bool b_over = ho.min_excess_z > 0 && exceeds_other_half(ho, lb, la, noise_floor(x, y, va, la, calibration), calibration);
             const bool kept = a_over   ? is_highlight(ho, lb, lb, vb, vb, calibration, cluster)
                               : b_over ? is_highlight(ho, la, la, va, va, calibration, cluster)
                                        : is_highlight(ho, la, lb, va, vb, calibration, cluster);
@@ -539,8 +546,8 @@ private:
         const highlight_rule rule = options_.highlight.rule;
         const bool judges_confidence = rule == highlight_rule::confident || rule == highlight_rule::confident_and_agree;
         for (int h = 0; h < 2; ++h)
-            for (std::size_t j = 0; j < rep.half[h].outliers; ++j) {
-                const std::uint32_t i = halves_[h].order[j];
+            for (std::size_t j = 0; j < rep.half[h].outliers - rep.half[h].local; ++j) {  // local flags
+                const std::uint32_t i = halves_[h].order[j];  // exceed the other half already
                 if (lab[1 - h][i] & outlier_bit) continue;  // a pair, decided above
                 const int x = static_cast<int>(i % static_cast<std::uint32_t>(w));
                 const int y = static_cast<int>(i / static_cast<std::uint32_t>(w));
@@ -550,11 +557,47 @@ private:
                         lab[h][i] |= highlight_bit;
                     continue;
                 }
-                if (!exceeds_other_half(options_.highlight, mean_colour(hb[h]->color, x, y),
-                                        mean_colour(hb[1 - h]->color, x, y),
-                                        reduced_variance(hb[1 - h]->variance, x, y), cal))
+                const double l_other = mean_colour(hb[1 - h]->color, x, y);
+                const double v_other = noise_floor(x, y, reduced_variance(hb[1 - h]->variance, x, y), l_other, cal);
+                if (!exceeds_other_half(options_.highlight, mean_colour(hb[h]->color, x, y), l_other, v_other, cal))
                     lab[h][i] |= consistent_bit;
             }
+    }
+
+    // The other half's variance at (x, y), but never below what its neighbourhood's relative
+    // variance (both halves, the pixel left out; local_test.hpp) predicts at its level: one
+    // pixel's variance from few heavy-tailed samples is often far too low, and a noisy pixel
+    // would then "exceed" its other half. Renderer units, like v.
+    double noise_floor(int x, int y, double v, double level, double calibration) {
+        const local_test_scratch& ls = local_scratch_;
+        if (!options_.local_test || ls.rel_var[0].empty() || !(calibration > 0)) return v;
+        const int w = static_cast<int>(ls.rel_var[0].size() / static_cast<std::size_t>(frame_height_));
+        const detail::pooled_estimate e = detail::pooled_relative_variance(
+            ls.rel_var, w, frame_height_, x, y, options_.local.radius, options_.local.min_neighbours, pool_);
+        if (!(e.nu == e.nu)) return v;  // too few neighbours: the pixel's own variance
+        return std::max(v, e.r * level * level / calibration);
+    }
+
+    // The local test's flags join the outliers (after the global ones in each half's list).
+    template <class C, class V, class A>
+    void add_local_flags(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b, frame_report& rep) {
+        using L = local_half<std::remove_const_t<C>, std::remove_const_t<V>, std::remove_const_t<A>>;
+        const L halves[2] = {L{a.color, a.variance, a.alpha, halves_[0].label.data()},
+                             L{b.color, b.variance, b.alpha, halves_[1].label.data()}};
+        local_test_options lo = options_.local;
+        lo.variance_scale *= rep.variance_calibration;
+        if (!local_test(halves[0], halves[1], lo, local_scratch_, local_result_).ok()) return;  // options checked
+        for (int h = 0; h < 2; ++h) {
+            half_state& s = halves_[h];
+            s.order.resize(rep.half[h].outliers);  // candidates past the ESD's count are not outliers
+            for (const std::uint32_t i : local_result_.half[h].index) {
+                if (s.label[i] & outlier_bit) continue;
+                s.label[i] |= outlier_bit;
+                s.order.push_back(i);
+                ++rep.half[h].local;
+            }
+            rep.half[h].outliers = s.order.size();
+        }
     }
 
     // The pixels to rebuild: outliers not kept, and non-finite pixels (row-major list).
@@ -689,6 +732,10 @@ private:
     half_state halves_[2];
     variance_calibration calibration_;
     std::vector<std::uint32_t> pairs_;
+    local_test_scratch local_scratch_;
+    local_test_result local_result_;
+    std::vector<float> pool_;  // neighbourhood scratch of noise_floor
+    int frame_height_ = 1;
 };
 
 // The final image of a frame, (A + B) / 2, and the variance of that mean, (vA + vB) / 4.
