@@ -18,6 +18,7 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <new>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -436,14 +437,23 @@ int run(const options& c) {
 }  // namespace
 
 int main(int argc, char** argv) {
-    options c;
-    bool done = false;
-    std::string e = firefly_cli::parse(argc, argv, c, done);
-    if (done) return 0;
-    if (e.empty()) e = check_files(c);
-    if (!e.empty()) {
-        std::fprintf(stderr, "firefly: %s\n", e.c_str());
-        return 2;
+    // Readers check sizes before allocating; this catch is for the rest (an image that fits
+    // the limits but not the machine's memory): one line and exit 1, never an abort.
+    try {
+        options c;
+        bool done = false;
+        std::string e = firefly_cli::parse(argc, argv, c, done);
+        if (done) return 0;
+        if (e.empty()) e = check_files(c);
+        if (!e.empty()) {
+            std::fprintf(stderr, "firefly: %s\n", e.c_str());
+            return 2;
+        }
+        return run(c);
+    } catch (const std::bad_alloc&) {
+        std::fprintf(stderr, "firefly: out of memory\n");
+    } catch (const std::exception& ex) {
+        std::fprintf(stderr, "firefly: %s\n", ex.what());
     }
-    return run(c);
+    return 1;
 }
