@@ -1,0 +1,66 @@
+#!/usr/bin/python3
+"""The README's failed-bucket pictures: the Cycles caustics render with a NaN square in half A
+(a render bucket that failed), cleaned by firefly's default (rebuilt from half B) and by the
+paper's spatial rule, next to the reference. Needs the Python module on PYTHONPATH and
+python3-openimageio.
+
+    PYTHONPATH=build/tests/python bench/bucket_images.py ../shared/data/cycles-caustics docs
+"""
+import sys
+
+import numpy as np
+import OpenImageIO as oiio
+
+import firefly
+
+
+def read_pfm(path):
+    with open(path, "rb") as f:
+        kind = f.readline().strip()
+        w, h = map(int, f.readline().split())
+        scale = float(f.readline())
+        channels = 3 if kind == b"PF" else 1
+        data = np.frombuffer(f.read(), dtype="<f4" if scale < 0 else ">f4")
+    return data.reshape(h, w, channels)[::-1].astype(np.float32)  # PFM rows run bottom-up
+
+
+def write_png(path, rgb, crop, zoom=3):
+    y0, y1, x0, x1 = crop
+    img = np.nan_to_num(rgb[y0:y1, x0:x1], nan=0.0)
+    img = np.where(np.isnan(rgb[y0:y1, x0:x1]), [1.0, 0.0, 1.0], img)  # NaN in magenta
+    img = np.clip(img, 0.0, 1.0) ** (1 / 2.2)
+    img = np.repeat(np.repeat(img, zoom, axis=0), zoom, axis=1)
+    out = oiio.ImageBuf(np.ascontiguousarray((img * 255 + 0.5).astype(np.uint8)))
+    if not out.write(path):
+        sys.exit("cannot write " + path)
+
+
+def relmse(img, ref):
+    return float(np.mean((img - ref) ** 2 / (ref ** 2 + 0.01)))
+
+
+def main():
+    src, out = sys.argv[1], sys.argv[2]
+    a, va, b, vb, ref = (read_pfm(f"{src}/{n}.pfm") for n in ("a_color", "a_variance", "b_color", "b_variance", "reference"))
+    y0, x0, size = 196, 200, 72  # the bucket: over the glass and the metal sphere
+    a[y0:y0 + size, x0:x0 + size] = np.nan
+    va[y0:y0 + size, x0:x0 + size] = np.nan
+    crop = (y0 - 24, y0 + size + 24, x0 - 24, x0 + size + 24)
+    box = (slice(y0, y0 + size), slice(x0, x0 + size))
+    write_png(f"{out}/bucket_input.png", 0.5 * a + 0.5 * b, crop)
+    write_png(f"{out}/bucket_reference.png", ref, crop)
+    for name, rebuild in (("firefly", "other_half"), ("spatial", "spatial")):
+        ca, cva, cb, cvb = a.copy(), va.copy(), b.copy(), vb.copy()
+        rep = firefly.Detector(rebuild=rebuild).process(ca, cva, cb, cvb)
+        final = 0.5 * ca + 0.5 * cb
+        write_png(f"{out}/bucket_{name}.png", final, crop)
+        print(f"{name}: relMSE in the bucket {relmse(final[box], ref[box]):.4f}, frame {relmse(final, ref):.4f}, "
+              f"status {'ok' if rep.ok else 'not ok'}")
+    intact = firefly.Detector()
+    ia, ib = read_pfm(f"{src}/a_color.pfm"), b.copy()
+    intact.process(ia, read_pfm(f"{src}/a_variance.pfm"), ib, read_pfm(f"{src}/b_variance.pfm"))
+    print(f"intact frame: relMSE in the same square {relmse((0.5 * ia + 0.5 * ib)[box], ref[box]):.4f}")
+
+
+if __name__ == "__main__":
+    main()
