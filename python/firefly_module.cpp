@@ -121,10 +121,20 @@ py::dict status_to_dict(const status& s) {
     return d;
 }
 
-template <class T>
+// The stage timings, by stage name.
+py::dict stages_to_dict(const double (&ms)[frame_report::stages]) {
+    py::dict d;
+    for (const auto& nv : firefly_py::enum_names<frame_report::stage>::values) d[nv.first] = ms[nv.second];
+    return d;
+}
+
+// A field as plain Python (as_dict), or as an attribute (a Status object for a status).
+template <bool attribute, class T>
 py::object field_to_python(const T& v) {
     if constexpr (std::is_same_v<T, status>) {
-        return status_to_dict(v);
+        return attribute ? py::cast(v) : py::object(status_to_dict(v));
+    } else if constexpr (std::is_same_v<T, double[frame_report::stages]>) {
+        return stages_to_dict(v);
     } else {
         return py::cast(v);
     }
@@ -132,13 +142,13 @@ py::object field_to_python(const T& v) {
 
 py::dict half_to_dict(const half_report& h) {
     py::dict d;
-    firefly_py::for_each_half_field([&](const char* name, auto member) { d[name] = field_to_python(h.*member); });
+    firefly_py::for_each_half_field([&](const char* name, auto member) { d[name] = field_to_python<false>(h.*member); });
     return d;
 }
 
 py::dict frame_to_dict(const frame_report& r) {
     py::dict d;
-    firefly_py::for_each_frame_field([&](const char* name, auto member) { d[name] = field_to_python(r.*member); });
+    firefly_py::for_each_frame_field([&](const char* name, auto member) { d[name] = field_to_python<false>(r.*member); });
     py::list halves;
     halves.append(half_to_dict(r.half[0]));
     halves.append(half_to_dict(r.half[1]));
@@ -159,12 +169,16 @@ void bind_reports(py::module_& m) {
         .def("__repr__", [](const status& s) { return "Status(" + py::repr(status_to_dict(s)).cast<std::string>() + ")"; });
 
     py::class_<half_report> half(m, "HalfReport", "What the detector found and did in one half buffer.");
-    firefly_py::for_each_half_field([&](const char* name, auto member) { half.def_readonly(name, member); });
+    firefly_py::for_each_half_field([&](const char* name, auto member) {
+        half.def_property_readonly(name, [member](const half_report& h) { return field_to_python<true>(h.*member); });
+    });
     half.def("as_dict", &half_to_dict, "The same fields as plain Python types.");
     half.def("__repr__", &half_repr);
 
     py::class_<frame_report> frame(m, "FrameReport", "The report of one frame: half[0], half[1] and the frame's fields.");
-    firefly_py::for_each_frame_field([&](const char* name, auto member) { frame.def_readonly(name, member); });
+    firefly_py::for_each_frame_field([&](const char* name, auto member) {
+        frame.def_property_readonly(name, [member](const frame_report& r) { return field_to_python<true>(r.*member); });
+    });
     frame.def_property_readonly(
         "half", [](const frame_report& r) { return py::make_tuple(r.half[0], r.half[1]); },
         "The two half reports (A, B).");

@@ -83,6 +83,7 @@ void print_value(const char* name, const firefly::status& s) { std::printf("%s %
 void print_value(const char* name, double v) { std::printf("%s %.17g\n", name, v); }
 void print_value(const char* name, int v) { std::printf("%s %d\n", name, v); }
 void print_value(const char* name, std::size_t v) { std::printf("%s %zu\n", name, v); }
+void print_value(const char*, const double (&)[firefly::frame_report::stages]) {}  // timings differ per run
 
 void print_report(const firefly::frame_report& r) {
     firefly_py::for_each_frame_field([&](const char* name, auto member) { print_value(name, r.*member); });

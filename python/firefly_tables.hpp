@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstddef>
+#include <iterator>
 #include <type_traits>
 #include <utility>
 
@@ -45,6 +46,16 @@ struct enum_names<firefly::rebuild_source> {
 };
 
 template <>
+struct enum_names<firefly::frame_report::stage> {
+    using E = firefly::frame_report::stage;
+    static constexpr std::pair<const char*, E> values[] = {
+        {"candidates", E::candidates}, {"esd", E::esd}, {"local", E::local}, {"highlights", E::highlights},
+        {"other_half", E::other_half}, {"rebuild", E::rebuild}};
+};
+static_assert(std::size(enum_names<firefly::frame_report::stage>::values) == firefly::frame_report::stages,
+              "every frame_report::stage needs a name");
+
+template <>
 struct enum_names<firefly::errc> {
     using E = firefly::errc;
     static constexpr std::pair<const char*, E> values[] = {
@@ -69,8 +80,8 @@ const char* enum_name(E e) noexcept {
 }
 
 // Every detector_options member, by its flattened keyword (the member's own name; the
-// highlight rule is `highlight_rule`, as `rule` alone says nothing). f(name, get) where
-// get(options) returns a reference to the member.
+// highlight rule is `highlight_rule`, as `rule` alone says nothing, and the local test's
+// options carry `local_`). f(name, get) where get(options) returns a reference to the member.
 template <class F>
 constexpr void for_each_option(F&& f) {
     using O = firefly::detector_options;
@@ -90,6 +101,13 @@ constexpr void for_each_option(F&& f) {
     f("rebuild", [](O& o) -> auto& { return o.rebuild; });
     f("blend_spatial", [](O& o) -> auto& { return o.blend_spatial; });
     f("reconstruct", [](O& o) -> auto& { return o.reconstruct; });
+    f("local_test", [](O& o) -> auto& { return o.local_test; });
+    f("local_false_alarm", [](O& o) -> auto& { return o.local.false_alarm; });
+    f("local_radius", [](O& o) -> auto& { return o.local.radius; });
+    f("local_min_neighbours", [](O& o) -> auto& { return o.local.min_neighbours; });
+    f("local_variance_scale", [](O& o) -> auto& { return o.local.variance_scale; });
+    f("local_spatial", [](O& o) -> auto& { return o.local.spatial; });
+    f("local_homogeneity", [](O& o) -> auto& { return o.local.homogeneity; });
 }
 
 // Every half_report field: f(name, member pointer).
@@ -105,6 +123,7 @@ constexpr void for_each_half_field(F&& f) {
     f("mad", &H::mad);
     f("bound", &H::bound);
     f("outliers", &H::outliers);
+    f("local", &H::local);
     f("highlights", &H::highlights);
     f("consistent", &H::consistent);
     f("fireflies", &H::fireflies);
@@ -127,6 +146,7 @@ constexpr void for_each_frame_field(F&& f) {
     f("variance_calibration", &R::variance_calibration);
     f("lambdas_computed", &R::lambdas_computed);
     f("scratch_bytes", &R::scratch_bytes);
+    f("stage_ms", &R::stage_ms);  // a timing: differs from run to run
 }
 
 // ---------------------------------------------------------------------------------------
@@ -171,9 +191,10 @@ constexpr std::size_t count(List list) {
 }  // namespace detail
 
 static_assert(detail::count([](auto& c) { for_each_option(c); }) ==
-                  detail::aggregate_size<firefly::detector_options>() - 2 +  // highlight, reconstruction
+                  detail::aggregate_size<firefly::detector_options>() - 3 +  // highlight, reconstruction, local
                       detail::aggregate_size<firefly::highlight_options>() +
-                      detail::aggregate_size<firefly::reconstruct_options>(),
+                      detail::aggregate_size<firefly::reconstruct_options>() +
+                      detail::aggregate_size<firefly::local_test_options>(),
               "for_each_option must list every detector_options member");
 static_assert(detail::count([](auto& c) { for_each_half_field(c); }) == detail::aggregate_size<firefly::half_report>(),
               "for_each_half_field must list every half_report member");

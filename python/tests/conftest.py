@@ -91,7 +91,7 @@ def report_as_text(rep):
             return "%.17g" % v
         return str(v)
     d = rep.as_dict()
-    out = {k: text(v) for k, v in d.items() if k != "half"}
+    out = {k: text(v) for k, v in d.items() if k not in ("half", "stage_ms")}  # stage_ms: timings
     for h, half in zip("ab", d["half"]):
         out.update({"%s.%s" % (h, k): text(v) for k, v in half.items()})
     return out

@@ -10,9 +10,9 @@ import firefly
 from conftest import arrays_of, make_frame, same_bits
 
 HALF_FIELDS = ["pixels", "valid", "ignored", "nonfinite", "negative_variance", "median", "mad", "bound",
-               "outliers", "highlights", "consistent", "fireflies", "repaired", "from_other_half", "unreachable", "phase1_rounds",
+               "outliers", "local", "highlights", "consistent", "fireflies", "repaired", "from_other_half", "unreachable", "phase1_rounds",
                "phase2_iterations", "final_change", "reconstruction"]
-FRAME_FIELDS = ["ok", "error", "both_outliers", "variance_calibration", "lambdas_computed", "scratch_bytes", "half"]
+FRAME_FIELDS = ["ok", "error", "both_outliers", "variance_calibration", "lambdas_computed", "scratch_bytes", "stage_ms", "half"]
 
 
 def public(obj):
@@ -88,7 +88,9 @@ def test_options_round_trip():
     changed = {"alpha": 0.01, "bound_threshold": 3.0, "reduction": "max", "lambdas": "normal",
                "highlight_rule": "agree", "max_ratio": 3.0, "max_relative_error": 0.6, "min_excess_z": 0.0,
                "cluster_relative_error": 0.0, "kernel_width": 7, "sigma": 1.5, "tolerance": 1e-2,
-               "max_iterations": 0, "rebuild": "spatial", "blend_spatial": False, "reconstruct": False}
+               "max_iterations": 0, "rebuild": "spatial", "blend_spatial": False, "reconstruct": False,
+               "local_test": False, "local_false_alarm": 1e-3, "local_radius": 2, "local_min_neighbours": 4,
+               "local_variance_scale": 2.0, "local_spatial": False, "local_homogeneity": 0.05}
     assert set(changed) == set(defaults)  # every option is covered here
     det = firefly.Detector(threads=2, **changed)
     assert det.options == changed and det.threads == 2
@@ -99,10 +101,18 @@ def test_options_round_trip():
 
 
 def test_options_change_the_result():
-    frame = make_frame()
-    paper = firefly.Detector(highlight_rule="same_pixel", min_excess_z=0.0).process(**arrays_of(make_frame()))
-    default = firefly.Detector().process(**arrays_of(frame))
-    assert paper.as_dict() != default.as_dict()
+    paper, default = arrays_of(make_frame()), arrays_of(make_frame())
+    firefly.Detector(highlight_rule="same_pixel", min_excess_z=0.0, kernel_width=3).process(**paper)
+    firefly.Detector().process(**default)
+    assert not same_bits(paper["a_color"], default["a_color"])
+
+
+def test_stage_timings():
+    rep = firefly.Detector().process(**arrays_of(make_frame()))
+    ms = rep.stage_ms
+    assert list(ms) == ["candidates", "esd", "local", "highlights", "other_half", "rebuild"]
+    assert all(v >= 0 for v in ms.values()) and sum(ms.values()) > 0
+    assert rep.as_dict()["stage_ms"] == ms
 
 
 def test_float64_frame():
