@@ -5,7 +5,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-packages=(cmake g++ catch2 libglm-dev libbenchmark-dev libopenexr-dev libpng-dev)
+packages=(cmake g++ catch2 libglm-dev libbenchmark-dev libopenexr-dev libpng-dev nlohmann-json3-dev libcli11-dev
+          pybind11-dev python3-dev python3-numpy python3-pytest python3-openimageio)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
