@@ -8,6 +8,7 @@
 //   candidates_ms esd_ms highlights_ms other_half_ms rebuild_ms  frame_report::stage_ms
 //   rebuilt          half[k].fireflies + half[k].repaired, both halves
 //   rebuild_ns_px    rebuild stage ns per rebuilt pixel
+//   scratch_b_px_half  detector memory after the frame, bytes per pixel per half
 //   cold_over_warm   (cold cases) cold frame time / warm frame time, interleaved
 //   x_read_cpu, cold_over_warm_cpu  (1 thread) the same ratios in CPU time of the thread, which
 //                    a loaded machine disturbs less than wall time
@@ -269,6 +270,7 @@ void set_counters(benchmark::State& st, const tally& t, const frame_report& r, r
     st.counters["outliers"] = static_cast<double>(r.half[0].outliers + r.half[1].outliers);
     st.counters["rebuild_ns_px"] = n > 0 ? t.stage_mean(frame_report::rebuild) * 1e6 / n : 0.0;
     st.counters["lambdas"] = static_cast<double>(r.lambdas_computed);
+    st.counters["scratch_b_px_half"] = static_cast<double>(r.scratch_bytes) / (2.0 * static_cast<double>(r.half[0].pixels));
 }
 
 void frame_case(benchmark::State& st, std::string scene, int w, int h, mode m, unsigned threads) {
