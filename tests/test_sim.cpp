@@ -178,7 +178,7 @@ void check_independence(const sim::scene& base, sim::effect e, int k) {
     const sim::buffers a = sim::simulate_buffers(on, k), b = sim::simulate_buffers(off, k);
     const std::size_t np = a.pixels();
     std::size_t footprint = 0, differ = 0, outside_differ = 0, off_touched = 0;
-    const bool expected_everywhere = e == sim::fireflies || e == sim::caustics;  // documented
+    const bool expected_everywhere = e == sim::fireflies;  // documented in scene.hpp
     REQUIRE(!b.touched.empty());
     for (std::size_t i = 0; i < np; ++i) {
         off_touched += (b.touched[i] & e) != 0;

@@ -13,10 +13,10 @@
 // pixel, buffer) (random.hpp), and a pixel's model depends only on the effects whose footprint
 // holds it (layout.hpp). Turning an effect on or off therefore leaves every pixel outside its
 // footprint bit-identical in colour, variance, alpha and expected radiance, in every buffer,
-// with one documented exception: fireflies and caustics add their expected energy to the
-// expected radiance of every pixel they may reach (it is part of what the estimator converges
-// to), so `expected` changes wherever the firefly rate is non-zero. `frame::touched` gives each
-// pixel's footprint bits. Nothing depends on visiting order; results are the same on every
+// with one exception: `fireflies` adds its expected energy to the expected radiance of every
+// pixel it may reach (it is part of what the estimator converges to), so `expected` changes on
+// all the geometry while colour and variance change only where a firefly landed (caustics keep
+// theirs inside their own footprint). `frame::touched` gives each pixel's footprint bits. Nothing depends on visiting order; results are the same on every
 // compiler and standard library.
 //
 // Ground truth comes with every frame: the expected radiance per pixel (including the
