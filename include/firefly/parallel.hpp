@@ -33,7 +33,9 @@ namespace detail {
 //
 // Without exceptions, a failure to start a std::thread (std::system_error) cannot be caught
 // and terminates the program, as any std::thread use does; with exceptions the pool keeps the
-// workers it could start (none: the calling thread does all the work).
+// workers it could start (none: the calling thread does all the work). A task that throws on
+// the calling thread leaves run() after the workers are done with the job; one that throws on
+// a worker terminates, as with any std::thread. The detector's tasks do not throw.
 class thread_pool {
 public:
     using task = std::function<void(std::size_t)>;
@@ -67,20 +69,28 @@ public:
             ++generation_;
         }
         wake_.notify_all();
+        const finish_on_exit finish{*this};  // also if t throws on this thread
         work(t, count);
-        {
-            // No worker joins once job_ is cleared; wait for those that did.
-            std::unique_lock<std::mutex> l(m_);
-            job_ = nullptr;
-            done_.wait(l, [this] { return busy_ == 0; });
-        }
-        in_use_.store(false, std::memory_order_release);
     }
 
     // Worker threads started so far (0 before the first run with more than one task).
     std::size_t workers() const noexcept { return started_.load(std::memory_order_relaxed); }
 
 private:
+    // Ends a run: no worker joins once job_ is cleared; waits for those that did, then frees
+    // the pool for the next run.
+    struct finish_on_exit {
+        thread_pool& p;
+        ~finish_on_exit() {
+            {
+                std::unique_lock<std::mutex> l(p.m_);
+                p.job_ = nullptr;
+                p.done_.wait(l, [this] { return p.busy_ == 0; });
+            }
+            p.in_use_.store(false, std::memory_order_release);
+        }
+    };
+
     void work(const task& t, std::size_t count) {
         for (std::size_t i; (i = next_.fetch_add(1, std::memory_order_relaxed)) < count;) t(i);
     }
