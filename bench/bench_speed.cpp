@@ -22,6 +22,7 @@
 #include "pfm.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -31,6 +32,7 @@
 #include <memory>
 #include <random>
 #include <string>
+#include <thread>
 #include <vector>
 
 using namespace firefly;
@@ -421,6 +423,31 @@ int register_all() {
     return 0;
 }
 [[maybe_unused]] const int registered = register_all();
+
+// ---------------------------------------------------------------------------------------------
+// The cost of handing tasks to threads: executor::threads(n)'s persistent pool against starting
+// n - 1 std::threads per call (what threads(n) did before), for one call of n tiny tasks.
+
+void executor_pool(benchmark::State& st) {
+    const unsigned n = static_cast<unsigned>(st.range(0));
+    const executor e = executor::threads(n);
+    std::atomic<std::size_t> sum{0};
+    for (auto _ : st) e.run(n, [&](std::size_t i) { sum.fetch_add(i, std::memory_order_relaxed); });
+    benchmark::DoNotOptimize(sum.load());
+}
+void executor_spawn(benchmark::State& st) {
+    const unsigned n = static_cast<unsigned>(st.range(0));
+    std::atomic<std::size_t> sum{0};
+    for (auto _ : st) {
+        std::vector<std::thread> th;
+        for (unsigned i = 1; i < n; ++i) th.emplace_back([&, i] { sum.fetch_add(i, std::memory_order_relaxed); });
+        sum.fetch_add(0, std::memory_order_relaxed);
+        for (auto& t : th) t.join();
+    }
+    benchmark::DoNotOptimize(sum.load());
+}
+BENCHMARK(executor_pool)->Arg(2)->Arg(4)->UseRealTime();
+BENCHMARK(executor_spawn)->Arg(2)->Arg(4)->UseRealTime();
 
 // ---------------------------------------------------------------------------------------------
 // Parts of the detector on their own
