@@ -125,6 +125,43 @@ struct frame_shape {
     bool alpha;
 };
 
+// The assertions on one processed frame (see the top of the file).
+template <class T>
+void check_frame(const frame_shape& f, const int (&nch)[3], half_storage<T> (&s)[2], half_storage<T> (&before)[2],
+                 const bool (&flip)[2], const std::vector<std::uint8_t> (&mask)[2], const frame_report& r,
+                 bool finite) {
+    for (int i = 0; i < 2; ++i)
+        for (int y = 0; y < f.h; ++y)
+            for (int x = 0; x < f.w; ++x) {
+                // Views may be flipped: mask row y is view row y, storage row h-1-y.
+                const int sy = flip[i] ? f.h - 1 - y : y;
+                const std::uint8_t m = mask[i][static_cast<std::size_t>(y * f.w + x)];
+                // A refused frame writes no mask, so it may change nothing.
+                const bool may_change = (m & (mask_bits::firefly | mask_bits::nonfinite)) != 0;
+                bool pixel_finite = true;  // the input colour of this pixel
+                for (int c = 0; c < f.nc; ++c)
+                    pixel_finite = pixel_finite && std::isfinite(static_cast<double>(*element(before[i], 0, x, sy, c)));
+                for (int c = 0; c < f.nc; ++c)
+                    if (pixel_finite && std::isnan(static_cast<double>(*element(s[i], 0, x, sy, c)))) {
+                        std::fprintf(stderr, "half %d pixel (%d, %d) channel %d mask %d\n", i, x, y, c, m);
+                        fail("NaN out of a pixel whose colour was finite");
+                    }
+                for (int k = 0; k < 3; ++k)
+                    for (int c = 0; c < nch[k]; ++c) {
+                        const T now = *element(s[i], k, x, sy, c);
+                        const T was = *element(before[i], k, x, sy, c);
+                        const bool same = std::memcmp(&now, &was, sizeof(T)) == 0;
+                        if (!same && (k == 2 || !may_change)) {
+                            std::fprintf(stderr, "half %d pixel (%d, %d) image %d channel %d mask %d; frame: %s\n", i, x,
+                                         y, k, c, m, r.error.message());
+                            fail("an unmarked pixel changed");
+                        }
+                        if (finite && std::isnan(static_cast<double>(now)))
+                            fail("NaN out of finite input");
+                    }
+            }
+}
+
 template <class T>
 void run(FuzzedDataProvider& p) {
     const frame_shape f{p.ConsumeIntegralInRange<int>(1, 16), p.ConsumeIntegralInRange<int>(1, 16),
@@ -185,37 +222,7 @@ void run(FuzzedDataProvider& p) {
     detector& d = p.ConsumeBool() ? threaded : serial;
     d.set_options(o);
     const frame_report r = d.process(hb[0], hb[1], mv[0], mv[1]);
-
-    for (int i = 0; i < 2; ++i)
-        for (int y = 0; y < f.h; ++y)
-            for (int x = 0; x < f.w; ++x) {
-                // Views may be flipped: mask row y is view row y, storage row h-1-y.
-                const int sy = flip[i] ? f.h - 1 - y : y;
-                const std::uint8_t m = mask[i][static_cast<std::size_t>(y * f.w + x)];
-                // A refused frame writes no mask, so it may change nothing.
-                const bool may_change = (m & (mask_bits::firefly | mask_bits::nonfinite)) != 0;
-                bool pixel_finite = true;  // the input colour of this pixel
-                for (int c = 0; c < f.nc; ++c)
-                    pixel_finite = pixel_finite && std::isfinite(static_cast<double>(*element(before[i], 0, x, sy, c)));
-                for (int c = 0; c < f.nc; ++c)
-                    if (pixel_finite && std::isnan(static_cast<double>(*element(s[i], 0, x, sy, c)))) {
-                        std::fprintf(stderr, "half %d pixel (%d, %d) channel %d mask %d\n", i, x, y, c, m);
-                        fail("NaN out of a pixel whose colour was finite");
-                    }
-                for (int k = 0; k < 3; ++k)
-                    for (int c = 0; c < nch[k]; ++c) {
-                        const T now = *element(s[i], k, x, sy, c);
-                        const T was = *element(before[i], k, x, sy, c);
-                        const bool same = std::memcmp(&now, &was, sizeof(T)) == 0;
-                        if (!same && (k == 2 || !may_change)) {
-                            std::fprintf(stderr, "half %d pixel (%d, %d) image %d channel %d mask %d; frame: %s\n", i, x,
-                                         y, k, c, m, r.error.message());
-                            fail("an unmarked pixel changed");
-                        }
-                        if (finite && std::isnan(static_cast<double>(now)))
-                            fail("NaN out of finite input");
-                    }
-            }
+    check_frame(f, nch, s, before, flip, mask, r, finite);
 }
 
 }  // namespace
