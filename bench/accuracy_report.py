@@ -413,7 +413,9 @@ This run: simulated frames {size}, {date}, {cpus} CPUs ({load}).
 - **energy**: mean brightness of the output / the reference's, over all pixels, the dark ones
   (reference below the median of the lit pixels) and the bright ones (at or above their 95th
   percentile). 1 = no energy lost; an unbiased input reads ~1, a prefilter that cuts real
-  light reads below.
+  light reads below. The reference holds the fireflies' expected energy (the simulator's
+  expected radiance includes it, as a converged render does), so removing fireflies always
+  costs some energy; what matters is how much, and where.
 - **after NL-means**: scikit-image's non-local means on log(1 + x) (patch 5, distance 6,
   fast mode, sigma from `estimate_sigma`), at the strength h in {0.5, 2, 8, 32} x sigma that
   gives that method its lowest relMSE (one grid for all; fireflies survive NL-means unless h is
