@@ -313,6 +313,17 @@ TEST_CASE("dense scenes hit the share of pixels they name", "[sim][scenes]") {
         INFO(name);
         CHECK(hit_share(f, 0) == Approx(rate).epsilon(0.05));
         CHECK(hit_share(f, 1) == Approx(rate).epsilon(0.05));
+        // Fireflies bring much of the expected energy here; recall still has hits to count
+        // (visible against the pixel's radiance without fireflies).
+        const std::vector<float>* input[2] = {&f.color[0], &f.color[1]};
+        const double hits = (hit_share(f, 0) + hit_share(f, 1)) * static_cast<double>(f.pixels());
+        CHECK(static_cast<double>(sim::evaluate(f, input).visible) > 0.25 * hits);
+        double ff_share = 0, all = 0;
+        for (std::size_t i = 0; i < f.pixels(); ++i) {
+            ff_share += f.firefly_expected[i];
+            all += luminance(f.expected, i);
+        }
+        CHECK(ff_share / all > rate);
     }
 }
 

@@ -133,9 +133,11 @@ public:
     }
 
     // The radiance the estimator converges to, per channel.
-    void expected(const pixel_model& p, float out[3]) const noexcept {
+    // Returns the part that fireflies contribute (the same in every channel).
+    double expected(const pixel_model& p, float out[3]) const noexcept {
         const double ff = (p.p_ff + p.p_caustic) * p.energy_scale * mean_ratio_;
         for (int c = 0; c < 3; ++c) out[c] = static_cast<float>(p.cov * (p.sign * p.mu[c] + ff));
+        return p.cov * ff;
     }
 
 private:

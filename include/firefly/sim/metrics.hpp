@@ -2,7 +2,9 @@
 // any method (firefly or a peer): "changed" is read off the pixels themselves.
 //
 //   recall             visible firefly hits changed / visible firefly hits, per half. Visible:
-//                      the firefly energy adds more than 10x the pixel's expected value.
+//                      the firefly energy adds more than 10x the pixel's expected value without
+//                      fireflies (with them, no firefly could be visible on a dense frame, where
+//                      fireflies bring most of the expected energy).
 //   precision          changed pixels that got a firefly or a non-finite sample / changed
 //   false_positive     changed pixels with no firefly and not a highlight / all such pixels
 //   highlight_kept     highlight pixels unchanged in both halves / highlight pixels
@@ -122,7 +124,7 @@ accuracy evaluate_counts(const Truth& t, int k, Orig orig, Clean clean) {
     std::size_t vis_hit = 0, changed_true = 0, clean_px = 0, clean_changed = 0, hl = 0, hl_kept = 0;
     for (std::size_t i = 0; i < np; ++i) {
         const float* ex = &t.expected[i * 3];
-        const double expected = (ex[0] + ex[1] + ex[2]) / 3.0;
+        const double expected = t.expected_without_fireflies(i);
         const bool is_hl = !t.highlight.empty() && t.highlight[i];
         bool any_changed = false;
         for (int b = 0; b < k; ++b) {

@@ -207,6 +207,7 @@ inline void allocate(const scene& sc, int k, buffers& f) {
     f.nonfinite.assign(static_cast<std::size_t>(k), std::vector<std::uint8_t>());
     for (int b = 0; b < k; ++b) {
         if (fx & (fireflies | caustics)) f.firefly_energy[b].assign(np, 0.0f);
+    if (fx & (fireflies | caustics)) f.firefly_expected.assign(np, 0.0f);
         if (fx & (nonfinite | failed_bucket)) f.nonfinite[b].assign(np, 0);
     }
     f.expected.assign(np * 3, 0.0f);
@@ -236,7 +237,8 @@ inline buffers simulate_buffers(const scene& sc, int k) {
         for (int x = 0; x < f.width; ++x) {
             const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(f.width) + static_cast<std::size_t>(x);
             const detail::pixel_model p = lay.model(x, y);
-            lay.expected(p, &f.expected[i * 3]);
+            const double ff_expected = lay.expected(p, &f.expected[i * 3]);
+            if (!f.firefly_expected.empty()) f.firefly_expected[i] = static_cast<float>(ff_expected);
             f.highlight[i] = p.highlight ? 1 : 0;
             if (!f.alpha.empty()) f.alpha[i] = static_cast<float>(p.cov);
             std::uint32_t touched = p.touched;
@@ -268,6 +270,7 @@ inline frame simulate(const scene& sc) {
     }
     f.alpha = std::move(b.alpha);
     f.expected = std::move(b.expected);
+    f.firefly_expected = std::move(b.firefly_expected);
     f.highlight = std::move(b.highlight);
     f.touched = std::move(b.touched);
     return f;

@@ -67,6 +67,8 @@ struct frame {
     std::vector<float> color[2], variance[2];
     std::vector<float> alpha;            // 1 channel; empty unless alpha_coverage
     std::vector<float> expected;         // RGB: the radiance the estimator converges to
+    std::vector<float> firefly_expected; // per pixel: the part of `expected` (every channel)
+                                         // that fireflies bring; empty as firefly_energy
     std::vector<float> firefly_energy[2];// per pixel: mean-colour energy fireflies added to the
                                          // half's pixel mean (0: no firefly sample); empty when
                                          // the scene has no fireflies or caustics
@@ -81,6 +83,11 @@ struct frame {
         return firefly_energy[half].empty() ? 0.0f : firefly_energy[half][i];
     }
     bool bad(int half, std::size_t i) const noexcept { return !nonfinite[half].empty() && nonfinite[half][i]; }
+    // Mean expected radiance over the channels without the fireflies' share.
+    double expected_without_fireflies(std::size_t i) const noexcept {
+        const double e = (expected[i * 3] + expected[i * 3 + 1] + expected[i * 3 + 2]) / 3.0;
+        return firefly_expected.empty() ? e : e - firefly_expected[i];
+    }
 };
 
 // K >= 2 independent buffers of one frame (simulate_buffers). The scene's 2 x spp samples are
@@ -93,6 +100,7 @@ struct buffers {
     std::vector<std::vector<float>> firefly_energy;   // per buffer; empty as in frame
     std::vector<std::vector<std::uint8_t>> nonfinite; // per buffer; empty as in frame
     std::vector<float> alpha, expected;
+    std::vector<float> firefly_expected;
     std::vector<std::uint8_t> highlight;
     std::vector<std::uint32_t> touched;
     std::uint32_t effects = 0;
@@ -102,6 +110,10 @@ struct buffers {
         return firefly_energy[b].empty() ? 0.0f : firefly_energy[b][i];
     }
     bool bad(int b, std::size_t i) const noexcept { return !nonfinite[b].empty() && nonfinite[b][i]; }
+    double expected_without_fireflies(std::size_t i) const noexcept {
+        const double e = (expected[i * 3] + expected[i * 3 + 1] + expected[i * 3 + 2]) / 3.0;
+        return firefly_expected.empty() ? e : e - firefly_expected[i];
+    }
 };
 
 }  // namespace firefly::sim
