@@ -1,0 +1,154 @@
+// firefly: K per-pixel buffers a renderer feeds sample by sample or pass by pass, read out as
+// the views cross_buffer_detector (buffers.hpp) takes.
+//
+// Sample i of a pixel goes to buffer i mod K, i the renderer's own sample index (never the
+// order in which threads arrive), so the same render gives the same buffers on any number
+// of threads. Per pixel, buffer and channel the accumulator keeps Welford's running mean and
+// sum of squared deviations in double: M2 only ever adds delta * (x - mean), two factors of
+// one sign, so it never goes negative, and a 1e30 sample next to 1e-3 samples loses nothing
+// to cancellation (no sum of squares is subtracted). A NaN or Inf sample makes that pixel's
+// buffer non-finite; the detector rebuilds it from the other buffers.
+//
+// Threads: add() and add_tile() may run concurrently without locks as long as no two calls
+// at the same time touch the same pixel (disjoint tiles, rows or pixels per thread; the
+// buffer a sample goes to does not matter). finish() must happen after every add (join the
+// threads, or any other synchronisation) and before the views are read.
+//
+// Memory: K x pixels x (1 count + 2 doubles per channel), plus the float views from finish().
+#pragma once
+
+#include <cfloat>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "buffers.hpp"
+#include "image_view.hpp"
+#include "status.hpp"
+
+namespace firefly {
+
+class sample_accumulator {
+public:
+    sample_accumulator() = default;
+
+    // k >= 2 buffers of width x height pixels of `channels` (1 to 4) channels.
+    status reset(int width, int height, int k, int channels = 3) {
+        if (width <= 0 || height <= 0) return status{errc::invalid_argument, "accumulator: empty image"};
+        if (k < 2 || k > 64) return status{errc::invalid_argument, "accumulator: 2 to 64 buffers"};
+        if (channels < 1 || channels > 4) return status{errc::channel_mismatch, "accumulator: 1 to 4 channels"};
+        const std::size_t px = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+        if (px >= (std::size_t{1} << 32)) return status{errc::size_overflow, "accumulator: more than 2^32 pixels"};
+        w_ = width;
+        h_ = height;
+        k_ = k;
+        nc_ = channels;
+        const std::size_t cells = px * static_cast<std::size_t>(k);
+        count_.assign(cells, 0);
+        mean_.assign(cells * static_cast<std::size_t>(channels), 0.0);
+        m2_.assign(cells * static_cast<std::size_t>(channels), 0.0);
+        color_.assign(static_cast<std::size_t>(k), std::vector<float>(px * static_cast<std::size_t>(channels)));
+        variance_.assign(static_cast<std::size_t>(k), std::vector<float>(px * static_cast<std::size_t>(channels)));
+        return ok_status();
+    }
+
+    int width() const noexcept { return w_; }
+    int height() const noexcept { return h_; }
+    int buffers() const noexcept { return k_; }
+    int channels() const noexcept { return nc_; }
+    std::size_t bytes() const noexcept {
+        return count_.capacity() * sizeof(std::uint32_t) + (mean_.capacity() + m2_.capacity()) * sizeof(double) +
+               2 * static_cast<std::size_t>(k_) * (color_.empty() ? 0 : color_[0].capacity()) * sizeof(float);
+    }
+
+    // One sample (channels() values) of pixel (x, y), the pixel's sample_index-th.
+    status add(int x, int y, std::uint64_t sample_index, const float* value) noexcept {
+        if (x < 0 || y < 0 || x >= w_ || y >= h_ || value == nullptr)
+            return status{errc::invalid_argument, "accumulator: sample outside the image"};
+        add_unchecked(x, y, sample_index, value);
+        return ok_status();
+    }
+
+    // One pass over a tile: pixel (i, j) of `tile` is sample sample_index of pixel
+    // (x0 + i, y0 + j). The tile's channels must match.
+    template <class T>
+    status add_tile(int x0, int y0, std::uint64_t sample_index, const image_view<T>& tile) noexcept {
+        if (tile.empty()) return ok_status();
+        if (tile.channels() != nc_) return status{errc::channel_mismatch, "accumulator: tile channels differ"};
+        if (x0 < 0 || y0 < 0 || x0 > w_ - tile.width() || y0 > h_ - tile.height())
+            return status{errc::invalid_argument, "accumulator: tile outside the image"};
+        float v[4];
+        for (int j = 0; j < tile.height(); ++j)
+            for (int i = 0; i < tile.width(); ++i) {
+                for (int c = 0; c < nc_; ++c) v[c] = static_cast<float>(tile.load(i, j, c));
+                add_unchecked(x0 + i, y0 + j, sample_index, v);
+            }
+        return ok_status();
+    }
+
+    // Mean colour and variance of the mean, per buffer, as float. A buffer pixel with no
+    // sample is 0 with variance 0; with one sample its variance is unknown and is set to the
+    // sample's square (relative standard error 1: the least it can claim). Variances beyond
+// FLT_MAX (a 1e30 sample) are stored as FLT_MAX.
+    void finish() {
+        const std::size_t px = static_cast<std::size_t>(w_) * static_cast<std::size_t>(h_);
+        for (int b = 0; b < k_; ++b)
+            for (std::size_t p = 0; p < px; ++p) {
+                const std::size_t cell = p * static_cast<std::size_t>(k_) + static_cast<std::size_t>(b);
+                const double n = count_[cell];
+                for (int c = 0; c < nc_; ++c) {
+                    const std::size_t e = cell * static_cast<std::size_t>(nc_) + static_cast<std::size_t>(c);
+                    const double m = mean_[e];
+                    double var = n >= 2 ? m2_[e] / (n - 1) / n : m * m;
+                    if (!(var >= 0) && var == var) var = 0;  // never negative (NaN stays NaN)
+                    if (var > FLT_MAX) var = FLT_MAX;         // float saturates, never turns Inf
+                    color_[static_cast<std::size_t>(b)][p * static_cast<std::size_t>(nc_) + static_cast<std::size_t>(c)] = static_cast<float>(m);
+                    variance_[static_cast<std::size_t>(b)][p * static_cast<std::size_t>(nc_) + static_cast<std::size_t>(c)] = static_cast<float>(var);
+                }
+            }
+    }
+
+    // Samples in buffer b at (x, y).
+    std::uint32_t samples(int b, int x, int y) const noexcept {
+        return count_[pixel(x, y) * static_cast<std::size_t>(k_) + static_cast<std::size_t>(b)];
+    }
+    // Buffer b's mean colour and variance of the mean (after finish()), packed interleaved.
+    image_view<float> color(int b) noexcept { return view(color_[static_cast<std::size_t>(b)]); }
+    image_view<float> variance(int b) noexcept { return view(variance_[static_cast<std::size_t>(b)]); }
+    // All K buffers for cross_buffer_detector::process().
+    std::vector<buffer_view<float>> views() {
+        std::vector<buffer_view<float>> v;
+        for (int b = 0; b < k_; ++b) v.push_back({color(b), variance(b)});
+        return v;
+    }
+
+private:
+    std::size_t pixel(int x, int y) const noexcept {
+        return static_cast<std::size_t>(y) * static_cast<std::size_t>(w_) + static_cast<std::size_t>(x);
+    }
+    image_view<float> view(std::vector<float>& v) noexcept {
+        return image_view<float>::unchecked(v.data(), w_, h_, nc_, static_cast<std::ptrdiff_t>(sizeof(float)) * nc_,
+                                            static_cast<std::ptrdiff_t>(sizeof(float)) * nc_ * w_,
+                                            static_cast<std::ptrdiff_t>(sizeof(float)));
+    }
+    void add_unchecked(int x, int y, std::uint64_t sample_index, const float* value) noexcept {
+        const std::size_t cell = pixel(x, y) * static_cast<std::size_t>(k_) +
+                                 static_cast<std::size_t>(sample_index % static_cast<std::uint64_t>(k_));
+        const double n = ++count_[cell];
+        double* mean = &mean_[cell * static_cast<std::size_t>(nc_)];
+        double* m2 = &m2_[cell * static_cast<std::size_t>(nc_)];
+        for (int c = 0; c < nc_; ++c) {
+            const double v = value[c];
+            const double delta = v - mean[c];
+            mean[c] += delta / n;
+            m2[c] += delta * (v - mean[c]);
+        }
+    }
+
+    int w_ = 0, h_ = 0, k_ = 0, nc_ = 0;
+    std::vector<std::uint32_t> count_;   // pixel-major: K cells per pixel
+    std::vector<double> mean_, m2_;      // cell-major: channels per cell
+    std::vector<std::vector<float>> color_, variance_;
+};
+
+}  // namespace firefly

@@ -1,0 +1,495 @@
+// firefly: fireflies found and removed across K >= 2 independent buffers of one frame (a
+// renderer's sample-index-split buffers, accumulator.hpp, or N renders with different seeds).
+//
+// Model. Buffer k holds, per pixel, the mean x_k of its own n_k samples (n_k equal to within
+// one: sample i goes to buffer i mod K). Without fireflies the x_k are independent draws of
+// one law around the pixel's value. A firefly is a rare, huge sample: it sits in one buffer
+// (or a few) and lifts that buffer far above the others; a highlight is many samples that
+// agree, so every buffer is high together. The other buffers then give an unbiased value
+// with a known variance, so a buffer is judged against the others at its own pixel.
+//
+// Test. Levels L_k: the mean of the colour channels (the first three). Each is moved to
+// y_k = cbrt(L_k), the Wilson-Hilferty transform that makes a gamma-like (positive, right
+// skewed) mean close to normal; the statistic is a ratio of y's, so brightness cancels (a pixel
+// at 0.01 and one at 10 are judged alike, as in local_test.hpp). Per pixel, step down from the
+// highest buffer: the candidate c (highest not yet flagged) against the rest R (the others not
+// flagged, never c itself):
+//     T = (y_c - mean_R y) / (s sqrt(1 + 1/|R|))
+//   s, no variance (K >= 4, or use_variance = false): the sample standard deviation of the
+//     y_j over R; T is Student t with |R| - 1 degrees of freedom (the prediction interval of
+//     a normal sample), threshold t_{|R|-1}(q);
+//   s, with variance: mean_R y sqrt(r) / 3 (the delta method on cbrt), r the median over R of
+//     the relative variances Var[x_j] / x_j^2 of the buffer means (the median: a second firefly
+//     in R does not inflate it); threshold z(q), normal.
+// c is a firefly when T exceeds the threshold; the step repeats on the remaining buffers, at
+// most floor(K / 2) flags per pixel (more is no longer "a few": the majority is the pixel).
+// Promise: in a frame without fireflies the expected share of flagged pixel-buffers is at
+// most q (false_alarm): each step tests its maximum at level q, and the first step's maximum
+// of K is flagged with probability <= K q. Tested on the simulator's null scenes.
+//
+// The paper's rules for two halves, for K:
+//   "an outlier in both halves is a highlight, kept"  -> a pixel where all buffers, or all
+//       but a few, are high together is never flagged: the test is against the pixel's own
+//       other buffers, so agreement is the null. Nothing to do, nothing changed.
+//   "an outlier in one half is rebuilt"               -> a flagged buffer (a minority, at
+//       most floor(K / 2)) is rebuilt from the others.
+//   "rebuilt from the other half at the same pixel"   -> from the mean of the clean buffers
+//       at that pixel (colour and every channel; variance: the mean of their variances, what
+//       a clean buffer holds), so the mean of the K buffers equals the mean of the clean ones.
+//   "NaN/Inf in a half are repaired"                   -> a buffer with NaN/Inf in colour or
+//       variance at a pixel is left out of the test and rebuilt like a firefly.
+//   "bad in both halves: spatial reconstruction"       -> a pixel with more than floor(K / 2)
+//       non-finite buffers is left as it is and counted (report.left, error no_valid_pixels).
+//   K = 2 is the paper's method: the two buffers go to firefly::detector unchanged (variance
+//       required), with its global ESD, highlight check and spatial reconstruction.
+// Variance: that of each buffer's mean (accumulator.hpp gives it). Required for K = 3;
+// optional for K >= 4, where the spread of the buffers estimates the noise.
+//
+// Deterministic and independent of the order of the buffers: the per-pixel statistics are
+// taken in the order of the sorted levels (ties by colour), so a permutation of the buffers
+// permutes the output, bit for bit.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <vector>
+
+#include "image_view.hpp"
+#include "parallel.hpp"
+#include "pipeline.hpp"
+#include "status.hpp"
+#include "student_t.hpp"
+
+namespace firefly {
+
+// One buffer: colour (1 to 4 channels; the first three are colour, a 4th is carried along)
+// and the variance of its mean (1 channel or one per colour channel; may be empty when
+// K >= 4 or use_variance is false).
+template <class C, class V = C>
+struct buffer_view {
+    image_view<C> color;
+    image_view<V> variance;
+};
+
+struct cross_buffer_options {
+    double false_alarm = 1e-4;   // q: expected share of flagged pixel-buffers without fireflies
+    bool use_variance = true;    // K >= 4: false ignores given variances (spread of the buffers)
+    bool reconstruct = true;     // false: detect and report only
+    int radius = 1;              // the noise is pooled over (2 radius + 1)^2 pixels (1 to 8)
+    detector_options pair{};     // K = 2: firefly::detector's options
+};
+
+inline status check_cross_buffer_options(const cross_buffer_options& o) noexcept {
+    if (!(o.false_alarm > 0.0 && o.false_alarm < 0.5))
+        return status{errc::invalid_argument, "false_alarm must lie in (0, 0.5)"};
+    if (o.radius < 0 || o.radius > 8) return status{errc::invalid_argument, "radius must lie in [0, 8]"};
+    return ok_status();
+}
+
+struct [[nodiscard]] cross_buffer_report {
+    bool ok() const noexcept { return error.ok(); }
+    status error{};
+    int buffers = 0;
+    std::size_t pixels = 0;
+    std::size_t tested = 0;      // pixels with at least 3 usable buffers (K >= 3)
+    std::size_t fireflies = 0;   // pixel-buffers flagged as fireflies (rebuilt if reconstruct)
+    std::size_t nonfinite = 0;   // pixel-buffers with NaN/Inf, rebuilt from the others
+    std::size_t left = 0;        // pixels with more than K / 2 non-finite buffers, unchanged
+    std::vector<std::size_t> per_buffer;  // fireflies and non-finite, per buffer
+    frame_report pair{};         // K = 2: firefly::detector's report
+};
+
+namespace detail {
+
+inline constexpr int max_buffers = 64;
+
+// One pixel across the buffers: level, transform, relative variance, finiteness.
+struct pixel_buffers {
+    int k = 0;
+    std::array<double, max_buffers> level{}, y{}, rel_var{};
+    std::array<bool, max_buffers> finite{}, flagged{};
+    std::array<int, max_buffers> order{};  // usable buffers, highest y first
+    int usable = 0;
+};
+
+// Thresholds of the step-down: step i tests the i-th highest buffer against the ones below
+// it, at level q / C(K, i - 1) (Bonferroni over the i - 1 buffers set aside above it), with
+// df the pooled noise estimate's degrees of freedom.
+struct cross_thresholds {
+    std::array<double, max_buffers / 2 + 1> step{};
+    double q = 0, df = 0;
+    int k = 0;
+    void fill(double q_, int k_, double df_) noexcept {
+        q = q_;
+        k = k_;
+        df = df_;
+        double binom = 1;  // C(k, i - 1)
+        for (int i = 1; i <= k / 2; ++i) {
+            step[static_cast<std::size_t>(i)] = student_t_upper_quantile(q / binom, df);
+            binom = binom * (k - i + 1) / i;
+        }
+    }
+};
+
+inline double median_of(double* v, int n) noexcept {
+    std::sort(v, v + n);
+    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+// The pixel's own noise: the relative variance of one buffer's y, var(y) / mean(y)^2; from
+// the spread of its usable buffers, or (with variance) the median of Var[x] / x^2 / 9 (the
+// delta method on cbrt). NaN when unknown (fewer than 2 buffers, or a black pixel).
+inline double pixel_noise(const pixel_buffers& p, bool with_variance) noexcept {
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    if (with_variance) {
+        std::array<double, max_buffers> r{};
+        int m = 0;
+        for (int j = 0; j < p.usable; ++j) {
+            const double v = p.rel_var[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])];
+            if (std::isfinite(v)) r[static_cast<std::size_t>(m++)] = v;
+        }
+        return m == 0 ? nan : median_of(r.data(), m) / 9.0;
+    }
+    if (p.usable < 2) return nan;
+    double sum = 0, ss = 0;
+    for (int j = 0; j < p.usable; ++j) sum += p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])];
+    const double mean = sum / p.usable;
+    for (int j = 0; j < p.usable; ++j) {
+        const double d = p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])] - mean;
+        ss += d * d;
+    }
+    return mean > 0 ? ss / (p.usable - 1) / (mean * mean) : nan;
+}
+
+// Rosner-style step-down of one pixel: the largest i whose i-th highest buffer exceeds the
+// mean of the ones below it by more than step[i] noise standard deviations flags the top i
+// (a second firefly above the tested one cannot mask it). noise: the pooled relative variance
+// of y. Returns the number flagged (p.flagged set).
+inline int judge_pixel(pixel_buffers& p, double noise, const cross_thresholds& th) noexcept {
+    const int limit = std::min(p.k / 2 - (p.k - p.usable), p.usable - 1);
+    if (!(noise >= 0)) return 0;
+    for (int i = limit; i >= 1; --i) {
+        const int n = p.usable - i;  // |R|
+        double sum = 0;
+        for (int j = i; j < p.usable; ++j) sum += p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])];
+        const double mean = sum / n;
+        const double yc = p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(i - 1)])];
+        if (!(yc > mean)) continue;
+        const double s = mean * std::sqrt(noise * (1.0 + 1.0 / n));
+        if (s > 0 ? (yc - mean) / s > th.step[static_cast<std::size_t>(i)] : true) {
+            for (int j = 0; j < i; ++j) p.flagged[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])] = true;
+            return i;
+        }
+    }
+    return 0;
+}
+
+}  // namespace detail
+
+class cross_buffer_detector {
+public:
+    // exec and lambdas: for the K = 2 firefly::detector (and the K >= 3 rows).
+    explicit cross_buffer_detector(cross_buffer_options options = {}, executor exec = {},
+                                   std::shared_ptr<lambda_cache> lambdas = nullptr)
+        : options_(options), exec_(exec), pair_(options.pair, exec, std::move(lambdas)) {}
+
+    const cross_buffer_options& options() const noexcept { return options_; }
+    void set_options(const cross_buffer_options& o) {
+        options_ = o;
+        pair_.set_options(o.pair);
+    }
+    detector& pair_detector() noexcept { return pair_; }
+
+    // Cleans the k buffers in place. masks (optional, k views of 1 channel, frame-sized)
+    // receive mask_bits::firefly / nonfinite per pixel and buffer.
+    template <class C, class V>
+    cross_buffer_report process(const buffer_view<C, V>* buffers, int k,
+                                const image_view<std::uint8_t>* masks = nullptr) {
+        static_assert(!std::is_const_v<C> && !std::is_const_v<V>,
+                      "process() cleans the buffers in place: use detect() on const views");
+        return run(buffers, k, masks, options_.reconstruct);
+    }
+    template <class C, class V>
+    cross_buffer_report process(const std::vector<buffer_view<C, V>>& buffers,
+                                const std::vector<image_view<std::uint8_t>>& masks = {}) {
+        return process(buffers.data(), static_cast<int>(buffers.size()), masks.empty() ? nullptr : masks.data());
+    }
+    // Detection only: report and masks, the buffers unchanged (they may be const).
+    template <class C, class V>
+    cross_buffer_report detect(const buffer_view<C, V>* buffers, int k,
+                               const image_view<std::uint8_t>* masks = nullptr) {
+        return run(buffers, k, masks, false);
+    }
+    template <class C, class V>
+    cross_buffer_report detect(const std::vector<buffer_view<C, V>>& buffers,
+                               const std::vector<image_view<std::uint8_t>>& masks = {}) {
+        return detect(buffers.data(), static_cast<int>(buffers.size()), masks.empty() ? nullptr : masks.data());
+    }
+
+private:
+    template <class C, class V>
+    status check_inputs(const buffer_view<C, V>* b, int k, const image_view<std::uint8_t>* masks) const {
+        if (status st = check_cross_buffer_options(options_); !st.ok()) return st;
+        if (b == nullptr || k < 2) return status{errc::invalid_argument, "at least 2 buffers are needed"};
+        if (k > detail::max_buffers) return status{errc::invalid_argument, "at most 64 buffers"};
+        const bool has_var = !b[0].variance.empty();
+        if (k <= 3 && !has_var) return status{errc::invalid_argument, "2 or 3 buffers need variance"};
+        for (int i = 0; i < k; ++i) {
+            if (b[i].color.empty()) return status{errc::empty_image, "a buffer's colour is empty"};
+            if (b[i].color.channels() > 4) return status{errc::channel_mismatch, "colour needs 1 to 4 channels"};
+            if (!same_size(b[i].color, b[0].color)) return status{errc::size_mismatch, "the buffers differ in size"};
+            if (b[i].color.channels() != b[0].color.channels())
+                return status{errc::channel_mismatch, "the buffers differ in channels"};
+            if (b[i].variance.empty() == has_var)
+                return status{errc::invalid_argument, "every buffer or none needs variance"};
+            if (has_var) {
+                if (status st = check_half_views(b[i].color, b[i].variance, image_view<const C>{}); !st.ok())
+                    return st;
+                if (b[i].variance.channels() != b[0].variance.channels())
+                    return status{errc::channel_mismatch, "the buffers differ in variance channels"};
+            }
+            if (masks && (!same_size(masks[i], b[0].color) || masks[i].channels() != 1))
+                return status{errc::size_mismatch, "a mask must be 1 channel, frame-sized"};
+        }
+        if (b[0].color.pixel_count() >= (std::size_t{1} << 32))
+            return status{errc::size_overflow, "more than 2^32 pixels"};
+        return check_apart(b, k, masks, has_var);
+    }
+
+    // Every view written must be apart from every other view.
+    template <class C, class V>
+    static status check_apart(const buffer_view<C, V>* b, int k, const image_view<std::uint8_t>* masks, bool var) {
+        for (int i = 0; i < k; ++i)
+            for (int j = i; j < k; ++j) {
+                if ((i != j && views_may_overlap(b[i].color, b[j].color)) ||
+                    (var && (views_may_overlap(b[i].color, b[j].variance) ||
+                             views_may_overlap(b[i].variance, b[j].color) ||
+                             (i != j && views_may_overlap(b[i].variance, b[j].variance)))))
+                    return status{errc::aliased_views, "the buffers' views must not share memory"};
+                if (masks && i != j && views_may_overlap(masks[i], masks[j]))
+                    return status{errc::aliased_views, "two masks share memory"};
+                if (masks && (views_may_overlap(masks[i], b[j].color) || (var && views_may_overlap(masks[i], b[j].variance))))
+                    return status{errc::aliased_views, "a mask shares memory with a buffer"};
+            }
+        return ok_status();
+    }
+
+    template <class C, class V>
+    cross_buffer_report run(const buffer_view<C, V>* b, int k, const image_view<std::uint8_t>* masks, bool clean) {
+        cross_buffer_report rep;
+        rep.buffers = k;
+        if (status st = check_inputs(b, k, masks); !st.ok()) {
+            rep.error = st;
+            return rep;
+        }
+        rep.pixels = b[0].color.pixel_count();
+        rep.per_buffer.assign(static_cast<std::size_t>(k), 0);
+        if (k == 2) return run_pair(b, masks, clean, rep);
+        const bool has_var = !b[0].variance.empty();
+        const bool with_var = has_var && (k <= 3 || options_.use_variance);
+        const int window = 2 * options_.radius + 1;
+        // The pooled estimate: a median of window^2 estimates of K - 1 degrees of freedom
+        // each (efficiency 2 / pi against their mean).
+        const double df = std::max(1.0, 2.0 / detail::pi * window * window * (k - 1));
+        if (thresholds_.q != options_.false_alarm || thresholds_.k != k || thresholds_.df != df)
+            thresholds_.fill(options_.false_alarm, k, df);
+        const int h = b[0].color.height();
+        noise_.resize(rep.pixels);
+        exec_.run(static_cast<std::size_t>(h), [&](std::size_t y) {
+            noise_row(b, k, has_var, with_var, static_cast<int>(y));
+        });
+        std::vector<row_counts> counts(static_cast<std::size_t>(h), row_counts(k));
+        exec_.run(static_cast<std::size_t>(h), [&](std::size_t y) {
+            run_row(b, k, masks, clean, has_var, with_var, static_cast<int>(y), counts[y]);
+        });
+        for (const row_counts& c : counts) {
+            rep.tested += c.tested;
+            rep.fireflies += c.fireflies;
+            rep.nonfinite += c.nonfinite;
+            rep.left += c.left;
+            for (int i = 0; i < k; ++i) rep.per_buffer[static_cast<std::size_t>(i)] += c.per_buffer[static_cast<std::size_t>(i)];
+        }
+        if (clean && rep.left > 0)
+            rep.error = status{errc::no_valid_pixels, "pixels with more than half of the buffers non-finite were left"};
+        return rep;
+    }
+
+    template <class C, class V>
+    cross_buffer_report& run_pair(const buffer_view<C, V>* b, const image_view<std::uint8_t>* masks, bool clean,
+                                  cross_buffer_report& rep) {
+        const half_buffer<C, V> a{b[0].color, b[0].variance, {}};
+        const half_buffer<C, V> o{b[1].color, b[1].variance, {}};
+        const image_view<std::uint8_t> none{};
+        const image_view<std::uint8_t>& ma = masks ? masks[0] : none;
+        const image_view<std::uint8_t>& mb = masks ? masks[1] : none;
+        if (clean) {
+            if constexpr (!std::is_const_v<C> && !std::is_const_v<V>) rep.pair = pair_.process(a, o, ma, mb);
+        } else {
+            rep.pair = pair_.detect(a, o, ma, mb);
+        }
+        rep.error = rep.pair.error;
+        for (int i = 0; i < 2; ++i) {
+            const half_report& hr = rep.pair.half[i];
+            rep.fireflies += hr.fireflies;
+            rep.nonfinite += hr.nonfinite;
+            rep.per_buffer[static_cast<std::size_t>(i)] = hr.fireflies + hr.nonfinite;
+        }
+        rep.tested = rep.pair.half[0].valid;
+        return rep;
+    }
+
+    struct row_counts {
+        explicit row_counts(int k) : per_buffer(static_cast<std::size_t>(k), 0) {}
+        std::size_t tested = 0, fireflies = 0, nonfinite = 0, left = 0;
+        std::vector<std::size_t> per_buffer;
+    };
+
+    // Level, relative variance and finiteness of buffer i at (x, y).
+    template <class C, class V>
+    static void read_buffer(const buffer_view<C, V>& b, int x, int y, bool has_var, int i, detail::pixel_buffers& p) {
+        const int nc = b.color.channels(), ncol = colour_channels(nc);
+        double sum = 0, fin = 0, sd = 0;
+        for (int c = 0; c < nc; ++c) {
+            const double v = b.color.load(x, y, c);
+            fin += v - v;
+            if (c < ncol) sum += v;
+        }
+        const std::size_t s = static_cast<std::size_t>(i);
+        p.level[s] = sum / ncol;
+        p.rel_var[s] = std::numeric_limits<double>::quiet_NaN();
+        if (has_var) {
+            const bool one = b.variance.channels() == 1;
+            for (int c = 0; c < ncol; ++c) {
+                const double v = b.variance.load(x, y, one ? 0 : c);
+                fin += v - v;
+                sd += std::sqrt(std::max(v, 0.0));
+            }
+            const double rel = (sd / ncol) / p.level[s];
+            if (p.level[s] > 0 && std::isfinite(rel)) p.rel_var[s] = rel * rel;
+        }
+        p.finite[s] = fin == 0.0 && std::isfinite(p.level[s]);
+        p.y[s] = std::cbrt(std::max(p.level[s], 0.0));
+        p.flagged[s] = !p.finite[s];
+    }
+
+    // Usable buffers sorted highest first; ties by colour, then by nothing (equal pixels).
+    template <class C, class V>
+    static void sort_buffers(const buffer_view<C, V>* b, int x, int y, detail::pixel_buffers& p) {
+        p.usable = 0;
+        for (int i = 0; i < p.k; ++i)
+            if (p.finite[static_cast<std::size_t>(i)]) p.order[static_cast<std::size_t>(p.usable++)] = i;
+        const int nc = b[0].color.channels();
+        std::sort(p.order.begin(), p.order.begin() + p.usable, [&](int i, int j) {
+            if (p.y[static_cast<std::size_t>(i)] != p.y[static_cast<std::size_t>(j)])
+                return p.y[static_cast<std::size_t>(i)] > p.y[static_cast<std::size_t>(j)];
+            for (int c = 0; c < nc; ++c) {
+                const double a = b[i].color.load(x, y, c), o = b[j].color.load(x, y, c);
+                if (a != o) return a > o;
+            }
+            return false;
+        });
+    }
+
+    // Pass 1: every pixel's own noise (before anything is rebuilt).
+    template <class C, class V>
+    void noise_row(const buffer_view<C, V>* b, int k, bool has_var, bool with_var, int y) {
+        detail::pixel_buffers p;
+        p.k = k;
+        const int w = b[0].color.width();
+        for (int x = 0; x < w; ++x) {
+            for (int i = 0; i < k; ++i) read_buffer(b[i], x, y, has_var, i, p);
+            sort_buffers(b, x, y, p);
+            noise_[static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)] =
+                detail::pixel_noise(p, with_var);
+        }
+    }
+
+    // The pooled noise at (x, y): the median of the window's known estimates, scaled from a
+    // median to a mean of chi-square(K - 1) / (K - 1) estimates (Wilson-Hilferty median;
+    // with variance the estimates have many degrees of freedom: no scale).
+    double pooled_noise(int x, int y, int w, int h, int k, bool with_var) const {
+        std::array<double, 17 * 17> v{};
+        int n = 0;
+        const int r = options_.radius;
+        for (int j = std::max(0, y - r); j <= std::min(h - 1, y + r); ++j)
+            for (int i = std::max(0, x - r); i <= std::min(w - 1, x + r); ++i) {
+                const double e = noise_[static_cast<std::size_t>(j) * static_cast<std::size_t>(w) + static_cast<std::size_t>(i)];
+                if (e >= 0) v[static_cast<std::size_t>(n++)] = e;
+            }
+        if (n == 0) return std::numeric_limits<double>::quiet_NaN();
+        const double med = detail::median_of(v.data(), n);
+        if (with_var) return med;
+        const double d = 2.0 / (9.0 * (k - 1)), m = 1.0 - d;
+        return med / (m * m * m);
+    }
+
+    template <class C, class V>
+    void run_row(const buffer_view<C, V>* b, int k, const image_view<std::uint8_t>* masks, bool clean,
+                 bool has_var, bool with_var, int y, row_counts& rc) const {
+        detail::pixel_buffers p;
+        p.k = k;
+        const int w = b[0].color.width();
+        for (int x = 0; x < w; ++x) {
+            for (int i = 0; i < k; ++i) read_buffer(b[i], x, y, has_var, i, p);
+            sort_buffers(b, x, y, p);
+            const int bad = k - p.usable;
+            if (bad > k / 2) {
+                ++rc.left;
+                write_masks(masks, p, x, y);
+                continue;
+            }
+            if (p.usable >= 3) ++rc.tested;
+            const int flags =
+                detail::judge_pixel(p, pooled_noise(x, y, w, b[0].color.height(), k, with_var), thresholds_);
+            rc.fireflies += static_cast<std::size_t>(flags);
+            rc.nonfinite += static_cast<std::size_t>(bad);
+            for (int i = 0; i < k; ++i) rc.per_buffer[static_cast<std::size_t>(i)] += p.flagged[static_cast<std::size_t>(i)];
+            write_masks(masks, p, x, y);
+            if (clean && (flags > 0 || bad > 0)) rebuild(b, p, x, y, has_var);
+        }
+    }
+
+    static void write_masks(const image_view<std::uint8_t>* masks, const detail::pixel_buffers& p, int x, int y) {
+        if (!masks) return;
+        for (int i = 0; i < p.k; ++i) {
+            const std::size_t s = static_cast<std::size_t>(i);
+            masks[i](x, y) = !p.flagged[s] ? 0 : p.finite[s] ? mask_bits::firefly : mask_bits::nonfinite;
+        }
+    }
+
+    // Flagged buffers take the mean of the clean ones (in sorted order: no buffer order).
+    template <class C, class V>
+    static void rebuild(const buffer_view<C, V>* b, const detail::pixel_buffers& p, int x, int y, bool has_var) {
+        if constexpr (!std::is_const_v<C> && !std::is_const_v<V>) {
+            const int nc = b[0].color.channels();
+            const int nv = has_var ? b[0].variance.channels() : 0;
+            std::array<double, 4> col{}, var{};
+            int n = 0;
+            for (int j = 0; j < p.usable; ++j) {
+                const int i = p.order[static_cast<std::size_t>(j)];
+                if (p.flagged[static_cast<std::size_t>(i)]) continue;
+                ++n;
+                for (int c = 0; c < nc; ++c) col[static_cast<std::size_t>(c)] += b[i].color.load(x, y, c);
+                for (int c = 0; c < nv; ++c) var[static_cast<std::size_t>(c)] += std::max(b[i].variance.load(x, y, c), 0.0);
+            }
+            for (int i = 0; i < p.k; ++i) {
+                if (!p.flagged[static_cast<std::size_t>(i)]) continue;
+                for (int c = 0; c < nc; ++c) b[i].color.store(x, y, c, col[static_cast<std::size_t>(c)] / n);
+                for (int c = 0; c < nv; ++c) b[i].variance.store(x, y, c, var[static_cast<std::size_t>(c)] / n);
+            }
+        }
+    }
+
+    cross_buffer_options options_;
+    executor exec_;
+    detector pair_;
+    detail::cross_thresholds thresholds_{};
+    std::vector<double> noise_;  // per pixel: its own relative variance of y (NaN: unknown)
+};
+
+}  // namespace firefly

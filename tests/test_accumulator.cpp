@@ -1,0 +1,148 @@
+// The K-buffer accumulator (accumulator.hpp): samples by index mod K, stable mean and
+// variance of the mean at the numeric edges, lock-free tiles from two threads, views that
+// go straight to the detector.
+#include <firefly/accumulator.hpp>
+
+#include <cfloat>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <thread>
+#include <vector>
+
+#include "catch.hpp"
+
+using namespace firefly;
+
+TEST_CASE("accumulator: sample i goes to buffer i mod K; mean and variance of the mean", "[accumulator]") {
+    sample_accumulator acc;
+    REQUIRE(acc.reset(2, 1, 3, 1).ok());
+    const float values[] = {1, 10, 100, 3, 20, 200, 5, 30, 300};  // indices 0..8
+    for (int i = 0; i < 9; ++i) REQUIRE(acc.add(1, 0, static_cast<std::uint64_t>(i), &values[i]).ok());
+    acc.finish();
+    CHECK(acc.samples(0, 1, 0) == 3);
+    CHECK(acc.samples(0, 0, 0) == 0);
+    CHECK(acc.color(0)(1, 0) == Approx(3.0));    // 1, 3, 5
+    CHECK(acc.color(1)(1, 0) == Approx(20.0));   // 10, 20, 30
+    CHECK(acc.color(2)(1, 0) == Approx(200.0));  // 100, 200, 300
+    CHECK(acc.variance(0)(1, 0) == Approx(4.0 / 3.0));     // sample variance 4, over 3
+    CHECK(acc.variance(2)(1, 0) == Approx(10000.0 / 3.0));
+    CHECK(acc.color(0)(0, 0) == 0.0f);  // no sample
+    CHECK(acc.variance(0)(0, 0) == 0.0f);
+}
+
+TEST_CASE("accumulator: a 1e30 sample next to 1e-3 samples", "[accumulator]") {
+    sample_accumulator acc;
+    REQUIRE(acc.reset(1, 1, 2, 3).ok());
+    for (int i = 0; i < 64; ++i) {
+        const float tiny[3] = {1e-3f, 1e-3f, 1e-3f};
+        const float huge[3] = {1e30f, 1e-3f, 0.0f};
+        REQUIRE(acc.add(0, 0, static_cast<std::uint64_t>(i), i == 11 ? huge : tiny).ok());
+    }
+    // Equal tiny samples after the huge one: the variance of buffer 1 stays >= 0.
+    acc.finish();
+    for (int b = 0; b < 2; ++b)
+        for (int c = 0; c < 3; ++c) {
+            const float v = acc.variance(b)(0, 0, c);
+            CHECK(v >= 0.0f);
+            CHECK(std::isfinite(v));
+            CHECK(std::isfinite(acc.color(b)(0, 0, c)));
+        }
+    CHECK(acc.variance(1)(0, 0, 1) == Approx(0.0).margin(1e-20));  // all 1e-3: exactly none
+    CHECK(acc.variance(0)(0, 0, 0) == Approx(0.0).margin(1e-20));
+    CHECK(acc.color(0)(0, 0, 0) == Approx(1e-3));
+    CHECK(acc.color(1)(0, 0, 0) == Approx(1e30 / 32));
+    CHECK(acc.variance(1)(0, 0, 0) == FLT_MAX);  // 1e60 / 32^2 saturates, never Inf
+    // The tiny buffer's mean is exact to float despite the huge one next to it.
+    CHECK(acc.color(0)(0, 0, 1) == 1e-3f);
+}
+
+TEST_CASE("accumulator: constant samples give no variance; shifted data no cancellation", "[accumulator]") {
+    sample_accumulator acc;
+    REQUIRE(acc.reset(1, 1, 2, 1).ok());
+    for (int i = 0; i < 2000; ++i) {
+        const float v = 1e6f + static_cast<float>(i % 2 == 0 ? (i / 2) % 2 : 0) * 1e-1f;
+        REQUIRE(acc.add(0, 0, static_cast<std::uint64_t>(i), &v).ok());
+    }
+    acc.finish();
+    CHECK(acc.variance(1)(0, 0) == 0.0f);  // buffer 1: always 1e6
+    // buffer 0: 1e6 and 1e6 + 0.1 alternately (as float): variance of the samples ~0.0025.
+    const double d = static_cast<double>(1e6f + 1e-1f) - 1e6;
+    CHECK(acc.variance(0)(0, 0) == Approx(d * d / 4 * 1000.0 / 999.0 / 1000.0).epsilon(1e-6));
+}
+
+TEST_CASE("accumulator: a NaN sample makes its buffer non-finite, the others stay", "[accumulator]") {
+    sample_accumulator acc;
+    REQUIRE(acc.reset(1, 1, 4, 1).ok());
+    for (int i = 0; i < 16; ++i) {
+        const float v = i == 5 ? std::numeric_limits<float>::quiet_NaN() : 1.0f;
+        REQUIRE(acc.add(0, 0, static_cast<std::uint64_t>(i), &v).ok());
+    }
+    acc.finish();
+    CHECK(std::isnan(acc.color(1)(0, 0)));
+    CHECK(acc.color(0)(0, 0) == 1.0f);
+    CHECK(acc.variance(0)(0, 0) == 0.0f);
+}
+
+TEST_CASE("accumulator: tiles from two threads without locks equal one thread", "[accumulator]") {
+    const int w = 32, h = 16, k = 4, passes = 12;
+    auto sample = [](int x, int y, int s, int c) {
+        return static_cast<float>(0.1 + 0.01 * x + 0.02 * y + ((x * 7 + y * 13 + s * 29 + c * 3) % 17) * 0.05);
+    };
+    auto render = [&](sample_accumulator& acc, int x0, int x1) {
+        std::vector<float> tile(static_cast<std::size_t>((x1 - x0) * h * 3));
+        for (int s = 0; s < passes; ++s) {
+            for (int y = 0; y < h; ++y)
+                for (int x = x0; x < x1; ++x)
+                    for (int c = 0; c < 3; ++c)
+                        tile[static_cast<std::size_t>(((y * (x1 - x0)) + (x - x0)) * 3 + c)] = sample(x, y, s, c);
+            REQUIRE(acc.add_tile(x0, 0, static_cast<std::uint64_t>(s), *make_image_view(tile.data(), x1 - x0, h, 3)).ok());
+        }
+    };
+    sample_accumulator one, two;
+    REQUIRE(one.reset(w, h, k).ok());
+    REQUIRE(two.reset(w, h, k).ok());
+    render(one, 0, w);
+    {
+        std::thread left([&] { render(two, 0, w / 2); });
+        std::thread right([&] { render(two, w / 2, w); });
+        left.join();
+        right.join();
+    }
+    one.finish();
+    two.finish();
+    for (int b = 0; b < k; ++b)
+        for (int y = 0; y < h; ++y)
+            for (int x = 0; x < w; ++x) {
+                CHECK(two.samples(b, x, y) == static_cast<std::uint32_t>(passes / k));
+                for (int c = 0; c < 3; ++c) {
+                    CHECK(two.color(b)(x, y, c) == one.color(b)(x, y, c));
+                    CHECK(two.variance(b)(x, y, c) == one.variance(b)(x, y, c));
+                }
+            }
+}
+
+TEST_CASE("accumulator: views go straight to the detector; errors as status", "[accumulator]") {
+    sample_accumulator acc;
+    CHECK(acc.reset(0, 4, 4).code() == errc::invalid_argument);
+    CHECK(acc.reset(4, 4, 1).code() == errc::invalid_argument);
+    CHECK(acc.reset(4, 4, 4, 5).code() == errc::channel_mismatch);
+    REQUIRE(acc.reset(8, 8, 4).ok());
+    const float v[3] = {1, 1, 1};
+    CHECK(acc.add(8, 0, 0, v).code() == errc::invalid_argument);
+    std::vector<float> tile(3 * 3 * 3, 0.5f);
+    CHECK(acc.add_tile(6, 6, 0, *make_image_view(tile.data(), 3, 3, 3)).code() == errc::invalid_argument);
+    for (int s = 0; s < 32; ++s)
+        for (int y = 0; y < 8; ++y)
+            for (int x = 0; x < 8; ++x) {
+                float c[3] = {0.5f + 0.01f * static_cast<float>((s * 5 + x + y) % 7), 0.5f, 0.5f};
+                if (x == 3 && y == 4 && s == 9) c[0] = c[1] = c[2] = 500.0f;  // buffer 1
+                REQUIRE(acc.add(x, y, static_cast<std::uint64_t>(s), c).ok());
+            }
+    acc.finish();
+    cross_buffer_detector d;
+    const cross_buffer_report r = d.process(acc.views());
+    REQUIRE(r.ok());
+    CHECK(r.per_buffer[1] >= 1);
+    CHECK(acc.color(1)(3, 4) < 1.0f);
+}

@@ -1,0 +1,279 @@
+// The K-buffer detector (buffers.hpp): K = 2 is firefly::detector, order of the buffers does
+// not matter, fireflies in one buffer go and nothing else moves, highlights stay, NaN is
+// repaired, and the false-alarm promise on simulated frames without fireflies.
+#include <firefly/buffers.hpp>
+#include <firefly/sim/metrics.hpp>
+#include <firefly/sim/scene.hpp>
+#include <firefly/sim/scenes.hpp>
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <vector>
+
+#include "catch.hpp"
+
+using namespace firefly;
+
+namespace {
+
+struct frame_k {
+    int w = 0, h = 0;
+    std::vector<std::vector<float>> color, variance;
+    std::vector<buffer_view<float>> views(bool with_variance = true) {
+        std::vector<buffer_view<float>> v;
+        for (std::size_t b = 0; b < color.size(); ++b)
+            v.push_back({*make_image_view(color[b].data(), w, h, 3),
+                         with_variance ? *make_image_view(variance[b].data(), w, h, 3) : image_view<float>{}});
+        return v;
+    }
+};
+
+frame_k from_sim(const sim::buffers& f) {
+    frame_k r;
+    r.w = f.width;
+    r.h = f.height;
+    r.color = f.color;
+    r.variance = f.variance;
+    return r;
+}
+
+// A smooth frame with gamma-like noise per buffer, from a small deterministic generator.
+frame_k noisy_frame(int k, int w, int h, std::uint64_t seed) {
+    frame_k f;
+    f.w = w;
+    f.h = h;
+    std::uint64_t s = seed * 0x9E3779B97F4A7C15ull + 1;
+    auto uniform = [&] {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        return (static_cast<double>(s >> 11) + 0.5) / 9007199254740992.0;
+    };
+    for (int b = 0; b < k; ++b) {
+        f.color.emplace_back(static_cast<std::size_t>(w * h * 3));
+        f.variance.emplace_back(static_cast<std::size_t>(w * h * 3));
+        for (int i = 0; i < w * h; ++i) {
+            const double level = 0.2 + 0.6 * (i % w) / w;
+            // mean of 16 exponential samples: relative sd 0.25
+            double m = 0;
+            for (int j = 0; j < 16; ++j) m -= std::log(uniform());
+            m = level * m / 16;
+            for (int c = 0; c < 3; ++c) {
+                f.color[static_cast<std::size_t>(b)][static_cast<std::size_t>(i * 3 + c)] = static_cast<float>(m);
+                f.variance[static_cast<std::size_t>(b)][static_cast<std::size_t>(i * 3 + c)] = static_cast<float>(level * level / 16);
+            }
+        }
+    }
+    return f;
+}
+
+}  // namespace
+
+TEST_CASE("K = 2 is firefly::detector, bit for bit", "[buffers]") {
+    sim::scene sc = sim::named_scene("caustics", 96, 64, 3);
+    const sim::buffers f = sim::simulate_buffers(sc, 2);
+    frame_k mine = from_sim(f), theirs = from_sim(f);
+    std::vector<std::uint8_t> m0(96 * 64), m1(96 * 64), t0(96 * 64), t1(96 * 64);
+    std::vector<image_view<std::uint8_t>> masks{*make_image_view(m0.data(), 96, 64), *make_image_view(m1.data(), 96, 64)};
+    cross_buffer_detector cd;
+    const cross_buffer_report r = cd.process(mine.views(), masks);
+    REQUIRE(r.ok());
+    auto tv = theirs.views();
+    detector d;
+    const frame_report fr = d.process(half_buffer<float>{tv[0].color, tv[0].variance, {}},
+                                      half_buffer<float>{tv[1].color, tv[1].variance, {}},
+                                      *make_image_view(t0.data(), 96, 64), *make_image_view(t1.data(), 96, 64));
+    REQUIRE(fr.ok());
+    CHECK(r.fireflies == fr.half[0].fireflies + fr.half[1].fireflies);
+    CHECK(r.fireflies > 0);
+    for (int b = 0; b < 2; ++b) {
+        CHECK(std::memcmp(mine.color[b].data(), theirs.color[b].data(), mine.color[b].size() * 4) == 0);
+        CHECK(std::memcmp(mine.variance[b].data(), theirs.variance[b].data(), mine.variance[b].size() * 4) == 0);
+    }
+    CHECK(m0 == t0);
+    CHECK(m1 == t1);
+}
+
+TEST_CASE("K buffers: the order of the buffers does not matter", "[buffers]") {
+    sim::scene sc = sim::named_scene("caustics", 80, 60, 5);
+    const sim::buffers f = sim::simulate_buffers(sc, 6);
+    for (const bool var : {true, false}) {
+        frame_k a = from_sim(f), b = from_sim(f);
+        const int perm[6] = {3, 0, 5, 1, 4, 2};
+        for (int i = 0; i < 6; ++i) {
+            b.color[static_cast<std::size_t>(i)] = f.color[static_cast<std::size_t>(perm[i])];
+            b.variance[static_cast<std::size_t>(i)] = f.variance[static_cast<std::size_t>(perm[i])];
+        }
+        cross_buffer_detector d;
+        const cross_buffer_report ra = d.process(a.views(var));
+        const cross_buffer_report rb = d.process(b.views(var));
+        REQUIRE(ra.ok());
+        REQUIRE(rb.ok());
+        CHECK(ra.fireflies > 0);
+        CHECK(ra.fireflies == rb.fireflies);
+        for (int i = 0; i < 6; ++i)
+            CHECK(std::memcmp(b.color[static_cast<std::size_t>(i)].data(), a.color[static_cast<std::size_t>(perm[i])].data(),
+                              a.color[0].size() * 4) == 0);
+    }
+}
+
+TEST_CASE("K buffers: a constant frame is left alone", "[buffers]") {
+    frame_k f;
+    f.w = 16;
+    f.h = 8;
+    for (int b = 0; b < 5; ++b) {
+        f.color.emplace_back(16 * 8 * 3, 0.7f);
+        f.variance.emplace_back(16 * 8 * 3, 0.0f);
+    }
+    const frame_k before = f;
+    for (const bool var : {true, false}) {
+        cross_buffer_detector d;
+        const cross_buffer_report r = d.process(f.views(var));
+        REQUIRE(r.ok());
+        CHECK(r.fireflies == 0);
+        CHECK(f.color == before.color);
+    }
+}
+
+TEST_CASE("K buffers: a firefly in one buffer is removed, nothing else moves", "[buffers]") {
+    for (const int k : {3, 4, 8})
+        for (const bool var : {true, false}) {
+            if (k == 3 && !var) continue;
+            INFO("k " << k << " variance " << var);
+            frame_k f = noisy_frame(k, 24, 16, 7);
+            const std::size_t at = (8 * 24 + 12) * 3;
+            for (int c = 0; c < 3; ++c) f.color[1][at + static_cast<std::size_t>(c)] *= 40.0f;
+            const frame_k before = f;
+            std::vector<std::vector<std::uint8_t>> mem(static_cast<std::size_t>(k), std::vector<std::uint8_t>(24 * 16));
+            std::vector<image_view<std::uint8_t>> masks;
+            for (auto& m : mem) masks.push_back(*make_image_view(m.data(), 24, 16));
+            cross_buffer_detector d;
+            const cross_buffer_report r = d.process(f.views(var), masks);
+            REQUIRE(r.ok());
+            CHECK(mem[1][8 * 24 + 12] == mask_bits::firefly);
+            CHECK(r.per_buffer[1] >= 1);
+            // The firefly's buffer now holds the mean of the others.
+            double others = 0;
+            for (int b = 0; b < k; ++b)
+                if (b != 1) others += before.color[static_cast<std::size_t>(b)][at];
+            CHECK(f.color[1][at] == Approx(others / (k - 1)).epsilon(1e-6));
+            // The other buffers are untouched at that pixel, and almost nothing else changed.
+            std::size_t changed = 0;
+            for (int b = 0; b < k; ++b)
+                for (std::size_t i = 0; i < f.color[0].size(); ++i)
+                    changed += f.color[static_cast<std::size_t>(b)][i] != before.color[static_cast<std::size_t>(b)][i];
+            CHECK(changed <= 3 + 3 * 2);  // the firefly's 3 channels, at most 2 chance flags
+            for (int b = 0; b < k; ++b)
+                if (b != 1) CHECK(f.color[static_cast<std::size_t>(b)][at] == before.color[static_cast<std::size_t>(b)][at]);
+        }
+}
+
+TEST_CASE("K buffers: a highlight in every buffer is kept", "[buffers]") {
+    for (const bool var : {true, false}) {
+        frame_k f = noisy_frame(8, 24, 16, 9);
+        for (int b = 0; b < 8; ++b)
+            for (int y = 6; y < 9; ++y)
+                for (int x = 10; x < 13; ++x)
+                    for (int c = 0; c < 3; ++c) {
+                        const std::size_t i = static_cast<std::size_t>((y * 24 + x) * 3 + c);
+                        f.color[static_cast<std::size_t>(b)][i] *= 200.0f;
+                        f.variance[static_cast<std::size_t>(b)][i] *= 40000.0f;
+                    }
+        const frame_k before = f;
+        cross_buffer_detector d;
+        const cross_buffer_report r = d.process(f.views(var));
+        REQUIRE(r.ok());
+        for (int b = 0; b < 8; ++b)
+            for (int y = 6; y < 9; ++y)
+                for (int x = 10; x < 13; ++x) {
+                    const std::size_t i = static_cast<std::size_t>((y * 24 + x) * 3);
+                    CHECK(f.color[static_cast<std::size_t>(b)][i] == before.color[static_cast<std::size_t>(b)][i]);
+                }
+    }
+}
+
+TEST_CASE("K buffers: NaN in one buffer is repaired from the others", "[buffers]") {
+    frame_k f = noisy_frame(4, 12, 10, 3);
+    const std::size_t at = (5 * 12 + 6) * 3;
+    f.color[2][at + 1] = std::numeric_limits<float>::quiet_NaN();
+    f.variance[0][at + 3] = std::numeric_limits<float>::infinity();
+    const frame_k before = f;
+    cross_buffer_detector d;
+    const cross_buffer_report r = d.process(f.views());
+    REQUIRE(r.ok());
+    CHECK(r.nonfinite == 2);
+    const double expect = (before.color[0][at] + before.color[1][at] + before.color[3][at]) / 3.0;
+    CHECK(f.color[2][at] == Approx(expect).epsilon(1e-6));
+    CHECK(std::isfinite(f.color[2][at + 1]));
+    CHECK(std::isfinite(f.variance[0][at + 3]));
+}
+
+TEST_CASE("K buffers: more than half non-finite is left and reported", "[buffers]") {
+    frame_k f = noisy_frame(4, 6, 6, 4);
+    for (int b = 0; b < 3; ++b) f.color[static_cast<std::size_t>(b)][0] = std::numeric_limits<float>::quiet_NaN();
+    cross_buffer_detector d;
+    const cross_buffer_report r = d.process(f.views());
+    CHECK(r.error.code() == errc::no_valid_pixels);
+    CHECK(r.left == 1);
+}
+
+TEST_CASE("K buffers: inputs refused as status values", "[buffers]") {
+    frame_k f = noisy_frame(3, 6, 6, 5);
+    cross_buffer_detector d;
+    CHECK(d.process(f.views(false)).error.code() == errc::invalid_argument);  // K = 3 needs variance
+    auto v = f.views();
+    v[1].color = *make_image_view(f.color[1].data(), 3, 6, 3);
+    CHECK(d.process(v).error.code() == errc::size_mismatch);
+    v = f.views();
+    v[2].color = v[0].color;
+    CHECK(d.process(v).error.code() == errc::aliased_views);
+    v = f.views();
+    v.resize(1);
+    CHECK(d.process(v).error.code() == errc::invalid_argument);
+    cross_buffer_options o;
+    o.false_alarm = 0.7;
+    d.set_options(o);
+    CHECK(d.process(f.views()).error.code() == errc::invalid_argument);
+}
+
+// The promise: without fireflies, at most q of the pixel-buffers are flagged (with a binomial
+// margin), over several seeds, sample shapes, K and with and without variance.
+TEST_CASE("K buffers: false alarms within q on frames without fireflies", "[buffers][calibration]") {
+    const double q = 1e-3;
+    for (const int k : {4, 8})
+        for (const bool var : {true, false}) {
+            std::size_t flagged = 0, tested = 0;
+            for (const std::uint64_t seed : {1u, 2u, 3u})
+                for (const double shape : {1.0, 4.0}) {
+                    const sim::scene s = sim::null_scene(seed, shape, 16 * k / 2, 96, 96);
+                    frame_k f = from_sim(sim::simulate_buffers(s, k));
+                    cross_buffer_options o;
+                    o.false_alarm = q;
+                    cross_buffer_detector d(o);
+                    const cross_buffer_report r = d.detect(f.views(var));
+                    REQUIRE(r.ok());
+                    flagged += r.fireflies;
+                    tested += r.tested * static_cast<std::size_t>(k);
+                }
+            const double promise = q * static_cast<double>(tested);
+            INFO("k " << k << " variance " << var << ": " << flagged << " of " << tested << " (promise " << promise << ")");
+            CHECK(static_cast<double>(flagged) <= promise + 3 * std::sqrt(promise));
+        }
+}
+
+TEST_CASE("K buffers: on the simulator's caustics, fireflies found and the error falls", "[buffers]") {
+    const sim::scene s = sim::named_scene("caustics", 128, 96, 2);
+    for (const int k : {4, 8}) {
+        const sim::buffers orig = sim::simulate_buffers(s, k);
+        frame_k f = from_sim(orig);
+        cross_buffer_detector d;
+        const cross_buffer_report r = d.process(f.views(false));
+        REQUIRE(r.ok());
+        const double before = sim::evaluate_buffers(orig, orig.color).relmse;
+        const sim::accuracy after = sim::evaluate_buffers(orig, f.color);
+        INFO("k " << k << ": relMSE " << before << " -> " << after.relmse);
+        CHECK(after.relmse < 0.5 * before);
+    }
+}
