@@ -59,10 +59,14 @@ int main(int argc, char** argv) {
     detector_options paper;
     paper.highlight.rule = highlight_rule::same_pixel;
     paper.highlight.min_excess_z = 0;
+    paper.rebuild = rebuild_source::spatial;
+    paper.local_test = false;
     detector d, dp(paper);
     frame_report report;
     auto peer = [](void (*fn)(const image_view<float>&, const image_view<float>&)) {
         return [fn](half_buffer<float>& a, half_buffer<float>& b) {
+            // the same NaN/Inf repair for every peer, so the table compares firefly handling
+            (void)firefly_peers::repair_nonfinite(a.color, a.variance, b.color, b.variance);
             fn(a.color, a.variance);
             fn(b.color, b.variance);
         };
