@@ -106,7 +106,9 @@ TEST_CASE("K buffers: the order of the buffers does not matter", "[buffers]") {
             b.color[static_cast<std::size_t>(i)] = f.color[static_cast<std::size_t>(perm[i])];
             b.variance[static_cast<std::size_t>(i)] = f.variance[static_cast<std::size_t>(perm[i])];
         }
-        cross_buffer_detector d;
+        cross_buffer_options o;
+        o.use_variance = var;
+        cross_buffer_detector d(o);
         const cross_buffer_report ra = d.process(a.views(var));
         const cross_buffer_report rb = d.process(b.views(var));
         REQUIRE(ra.ok());
@@ -129,7 +131,9 @@ TEST_CASE("K buffers: a constant frame is left alone", "[buffers]") {
     }
     const frame_k before = f;
     for (const bool var : {true, false}) {
-        cross_buffer_detector d;
+        cross_buffer_options o;
+        o.use_variance = var;
+        cross_buffer_detector d(o);
         const cross_buffer_report r = d.process(f.views(var));
         REQUIRE(r.ok());
         CHECK(r.fireflies == 0);
@@ -149,7 +153,9 @@ TEST_CASE("K buffers: a firefly in one buffer is removed, nothing else moves", "
             std::vector<std::vector<std::uint8_t>> mem(static_cast<std::size_t>(k), std::vector<std::uint8_t>(24 * 16));
             std::vector<image_view<std::uint8_t>> masks;
             for (auto& m : mem) masks.push_back(*make_image_view(m.data(), 24, 16));
-            cross_buffer_detector d;
+            cross_buffer_options o;
+            o.use_variance = var;
+            cross_buffer_detector d(o);
             const cross_buffer_report r = d.process(f.views(var), masks);
             REQUIRE(r.ok());
             CHECK(mem[1][8 * 24 + 12] == mask_bits::firefly);
@@ -182,7 +188,9 @@ TEST_CASE("K buffers: a highlight in every buffer is kept", "[buffers]") {
                         f.variance[static_cast<std::size_t>(b)][i] *= 40000.0f;
                     }
         const frame_k before = f;
-        cross_buffer_detector d;
+        cross_buffer_options o;
+        o.use_variance = var;
+        cross_buffer_detector d(o);
         const cross_buffer_report r = d.process(f.views(var));
         REQUIRE(r.ok());
         for (int b = 0; b < 8; ++b)
@@ -251,6 +259,7 @@ TEST_CASE("K buffers: false alarms within q on frames without fireflies", "[buff
                     frame_k f = from_sim(sim::simulate_buffers(s, k));
                     cross_buffer_options o;
                     o.false_alarm = q;
+                    o.use_variance = var;
                     cross_buffer_detector d(o);
                     const cross_buffer_report r = d.detect(f.views(var));
                     REQUIRE(r.ok());
