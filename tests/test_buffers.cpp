@@ -286,3 +286,23 @@ TEST_CASE("K buffers: on the simulator's caustics, fireflies found and the error
         CHECK(after.relmse < 0.5 * before);
     }
 }
+
+TEST_CASE("K buffers: detect() on const views changes nothing and reports what process() does", "[buffers]") {
+    for (const int k : {2, 5}) {
+        const sim::buffers orig = sim::simulate_buffers(sim::named_scene("caustics", 64, 48, 4), k);
+        frame_k f = from_sim(orig);
+        std::vector<buffer_view<const float>> cv;
+        for (int b = 0; b < k; ++b)
+            cv.push_back({*make_image_view(static_cast<const float*>(f.color[static_cast<std::size_t>(b)].data()), 64, 48, 3),
+                          *make_image_view(static_cast<const float*>(f.variance[static_cast<std::size_t>(b)].data()), 64, 48, 3)});
+        cross_buffer_detector d;
+        const cross_buffer_report seen = d.detect(cv);
+        REQUIRE(seen.ok());
+        CHECK(f.color == orig.color);
+        const cross_buffer_report done = d.process(f.views());
+        REQUIRE(done.ok());
+        CHECK(seen.fireflies == done.fireflies);
+        CHECK(seen.per_buffer == done.per_buffer);
+        CHECK(done.fireflies > 0);
+    }
+}
