@@ -25,6 +25,8 @@
 #include <cstring>
 #include <limits>
 #include <type_traits>
+#include <utility>
+#include <vector>
 
 #if defined(__SSE2__) || defined(_M_X64)
 #include <emmintrin.h>
@@ -366,6 +368,41 @@ std::size_t stddev_packed(const float* col, const float* var, const float* alpha
                                   : stddev_packed<vr::mean, CS, VS, false>(col, var, alpha, n, sd);
 }
 
+// Whether channel_traits<T> converts runs of values to float in bulk:
+//   static void to_float(const T* in, float* out, std::size_t n) noexcept;
+// (the documented hook for a renderer's half type: the stddev pass then converts each row
+// and runs the packed float kernel, instead of loading value by value).
+template <class T, class = void>
+struct has_row_conversion : std::false_type {};
+template <class T>
+struct has_row_conversion<T, std::void_t<decltype(channel_traits<T>::to_float(
+                                 std::declval<const T*>(), std::declval<float*>(), std::size_t{}))>>
+    : std::true_type {};
+
+// Packed float colour, packed variance of a converting type: row by row through a float row.
+template <class V>
+std::size_t stddev_converted_rows(const image_view<const float>& color, const image_view<V>& variance,
+                                  const float* alpha, variance_reduction how, float* sd) {
+    const int w = color.width(), cc = color.channels(), vc = variance.channels();
+    const std::size_t row = static_cast<std::size_t>(w) * static_cast<std::size_t>(vc);
+    std::vector<float> converted(row);
+    std::size_t negative_n = 0;
+    for (int y = 0; y < color.height(); ++y) {
+        const std::size_t first = static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
+        channel_traits<std::remove_cv_t<V>>::to_float(variance.data() + first * static_cast<std::size_t>(vc),
+                                                      converted.data(), row);
+        const float* col = color.data() + first * static_cast<std::size_t>(cc);
+        const float* ap = alpha ? alpha + first : nullptr;
+        float* out = sd + first;
+        const std::size_t n = static_cast<std::size_t>(w);
+        if (cc == 3) negative_n += vc == 1 ? stddev_packed<3, 1>(col, converted.data(), ap, n, how, out)
+                                           : stddev_packed<3, 3>(col, converted.data(), ap, n, how, out);
+        else negative_n += vc == 1 ? stddev_packed<4, 1>(col, converted.data(), ap, n, how, out)
+                                   : stddev_packed<4, 4>(col, converted.data(), ap, n, how, out);
+    }
+    return negative_n;
+}
+
 // The pass over any layout.
 template <class C, class V, class A>
 stddev_counts stddev_pass(const image_view<C>& color, const image_view<V>& variance, const image_view<A>& alpha,
@@ -406,6 +443,19 @@ stddev_counts stddev_pass(const image_view<C>& color, const image_view<V>& varia
         else if (packed && cc == 4 && vc == 4) negative_n = stddev_packed<4, 4>(color.data(), variance.data(), ap, n, how, sd);
         else if (packed && cc == 4 && vc == 1) negative_n = stddev_packed<4, 1>(color.data(), variance.data(), ap, n, how, sd);
         else done = false;
+    }
+    if constexpr (std::is_same_v<std::remove_cv_t<C>, float> && has_row_conversion<std::remove_cv_t<V>>::value) {
+        // Packed float colour with a variance type that converts whole rows to float (a
+        // renderer's half): each row of variance is converted into a scratch row and the
+        // packed float kernel runs on it. Alpha: packed float, or none.
+        constexpr bool float_alpha = std::is_same_v<std::remove_cv_t<A>, float>;
+        if (color.is_packed() && variance.is_packed() && (!has_alpha || (float_alpha && alpha.is_packed())) &&
+            (cc == 3 || cc == 4) && (vc == 1 || vc == cc)) {
+            const float* ap = nullptr;
+            if constexpr (float_alpha) ap = has_alpha ? alpha.data() : nullptr;
+            negative_n = stddev_converted_rows(color, variance, ap, how, sd);
+            done = true;
+        }
     }
     if (!done) {
         const strided<C> cs(color);
