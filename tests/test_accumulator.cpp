@@ -89,26 +89,32 @@ TEST_CASE("accumulator: tiles from two threads without locks equal one thread", 
     auto sample = [](int x, int y, int s, int c) {
         return static_cast<float>(0.1 + 0.01 * x + 0.02 * y + ((x * 7 + y * 13 + s * 29 + c * 3) % 17) * 0.05);
     };
+    // Returns whether every tile was taken (Catch's assertions are not for other threads).
     auto render = [&](sample_accumulator& acc, int x0, int x1) {
+        bool ok = true;
         std::vector<float> tile(static_cast<std::size_t>((x1 - x0) * h * 3));
         for (int s = 0; s < passes; ++s) {
             for (int y = 0; y < h; ++y)
                 for (int x = x0; x < x1; ++x)
                     for (int c = 0; c < 3; ++c)
                         tile[static_cast<std::size_t>(((y * (x1 - x0)) + (x - x0)) * 3 + c)] = sample(x, y, s, c);
-            REQUIRE(acc.add_tile(x0, 0, static_cast<std::uint64_t>(s), *make_image_view(tile.data(), x1 - x0, h, 3)).ok());
+            ok &= acc.add_tile(x0, 0, static_cast<std::uint64_t>(s), *make_image_view(tile.data(), x1 - x0, h, 3)).ok();
         }
+        return ok;
     };
     sample_accumulator one, two;
     REQUIRE(one.reset(w, h, k).ok());
     REQUIRE(two.reset(w, h, k).ok());
-    render(one, 0, w);
+    REQUIRE(render(one, 0, w));
+    bool ok_left = false, ok_right = false;
     {
-        std::thread left([&] { render(two, 0, w / 2); });
-        std::thread right([&] { render(two, w / 2, w); });
+        std::thread left([&] { ok_left = render(two, 0, w / 2); });
+        std::thread right([&] { ok_right = render(two, w / 2, w); });
         left.join();
         right.join();
     }
+    REQUIRE(ok_left);
+    REQUIRE(ok_right);
     one.finish();
     two.finish();
     for (int b = 0; b < k; ++b)
