@@ -85,8 +85,9 @@
 namespace firefly {
 
 // One buffer: colour (1 to 4 channels; the first three are colour, a 4th is carried along)
-// and the variance of its mean (1 channel or one per colour channel; may be empty when
-// K >= 4 or use_variance is false).
+// and the variance of its mean (1 channel or one per colour channel; empty in every buffer
+// or in none, and only when K >= 4). Given variances are rebuilt and checked for NaN/Inf
+// even when use_variance is off.
 template <class C, class V = C>
 struct buffer_view {
     image_view<C> color;
@@ -95,11 +96,11 @@ struct buffer_view {
 
 struct cross_buffer_options {
     double false_alarm = 1e-4;   // q: expected share of flagged pixel-buffers without fireflies
-    bool use_variance = false;   // K >= 4: also judge by the given variances (K <= 3 always
-                                 // does); off, the spread of the buffer means alone, which
-                                 // measured better at 8-16 samples per buffer
+    bool use_variance = false;   // K >= 4: the noise from the given variances instead of the
+                                 // spread of the buffer means (K = 3 always uses them); the
+                                 // spread measured better at 8-16 samples per buffer
     bool reconstruct = true;     // false: detect and report only
-    int radius = 1;              // the noise is pooled over (2 radius + 1)^2 pixels (1 to 8)
+    int radius = 1;              // the noise is pooled over (2 radius + 1)^2 pixels (0 to 8)
     detector_options pair{};     // K = 2: firefly::detector's options
 };
 
