@@ -8,32 +8,12 @@
 #include <vector>
 
 #include "catch.hpp"
+#include "frame_views.hpp"
 
 using namespace firefly;
 
 namespace {
-struct frame_views {
-    sim::frame f;
-    half_buffer<float> h[2];
-    explicit frame_views(sim::frame fr) : f(std::move(fr)) {
-        for (int i = 0; i < 2; ++i) {
-            h[i].color = *make_image_view(f.color[i].data(), f.width, f.height, 3);
-            h[i].variance = *make_image_view(f.variance[i].data(), f.width, f.height, 3);
-            if (!f.alpha.empty())
-                h[i].alpha = *make_image_view(static_cast<const float*>(f.alpha.data()), f.width, f.height, 1);
-        }
-    }
-    frame_views(const frame_views&) = delete;
-    std::size_t at(int x, int y) const { return static_cast<std::size_t>(y) * static_cast<std::size_t>(f.width) + static_cast<std::size_t>(x); }
-    void set(int half, int x, int y, float value, float variance) {
-        for (int c = 0; c < 3; ++c) {
-            f.color[half][at(x, y) * 3 + static_cast<std::size_t>(c)] = value;
-            f.variance[half][at(x, y) * 3 + static_cast<std::size_t>(c)] = variance;
-        }
-    }
-    float col(int half, int x, int y, int c = 0) const { return f.color[half][at(x, y) * 3 + static_cast<std::size_t>(c)]; }
-    float var(int half, int x, int y, int c = 0) const { return f.variance[half][at(x, y) * 3 + static_cast<std::size_t>(c)]; }
-};
+using firefly_test::frame_views;
 
 sim::frame flat(int w, int h, unsigned seed) { return sim::simulate(sim::named_scene("flat", w, h, seed)); }
 

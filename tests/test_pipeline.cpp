@@ -9,23 +9,12 @@
 #include <vector>
 
 #include "catch.hpp"
+#include "frame_views.hpp"
 
 using namespace firefly;
 
 namespace {
-struct halves {
-    sim::frame f;
-    half_buffer<float> h[2];
-    explicit halves(sim::frame fr) : f(std::move(fr)) {
-        for (int i = 0; i < 2; ++i) {
-            h[i].color = *make_image_view(f.color[i].data(), f.width, f.height, 3);
-            h[i].variance = *make_image_view(f.variance[i].data(), f.width, f.height, 3);
-            if (!f.alpha.empty())
-                h[i].alpha = *make_image_view(static_cast<const float*>(f.alpha.data()), f.width, f.height, 1);
-        }
-    }
-    halves(const halves&) = delete;
-};
+using halves = firefly_test::frame_views;
 
 // A flat noisy frame with hand-placed events.
 sim::frame flat(int w, int h, unsigned seed) {
