@@ -13,11 +13,12 @@
 // skewed) mean close to normal; every statistic is a ratio of y's, so brightness cancels (a
 // pixel at 0.01 and one at 10 are judged alike, as in local_test.hpp).
 //   Noise. v = Var[y] / E[y]^2 of one buffer, pooled: each pixel's own estimate (the spread
-//   of its K y's, K - 1 degrees of freedom; with use_variance, the median over its buffers of
-//   Var[x_k] / x_k^2 / 9, the delta method on cbrt), then the median over the (2 radius + 1)^2
-//   neighbourhood (robust to the fireflies in it), scaled from a median to a mean of
-//   chi-square(K - 1) / (K - 1) values. Never below the spread of the buffers the candidate is
-//   tested against (an edge or a highlight is noisier than its surroundings).
+//   of its K y's, K - 1 degrees of freedom; with use_variance, the larger of that and the
+//   median over its buffers of Var[x_k] / x_k^2 / 9, the delta method on cbrt), then the
+//   median over the (2 radius + 1)^2 neighbourhood (robust to the fireflies in it), scaled
+//   from a median to a mean of chi-square(K - 1) / (K - 1) values (without use_variance).
+//   Never below the spread of the buffers the candidate is tested against (an edge or a
+//   highlight is noisier than its surroundings).
 //   Step-down (Rosner's order): sorted y_(1) >= ... >= y_(K); for i from floor(K / 2) down
 //   to 1, the i-th highest against R, the buffers below it (never itself, nor the ones above):
 //       T_i = (y_(i) - mean_R y) / (mean_R y sqrt(v (1 + 1 / |R|)))
@@ -28,10 +29,10 @@
 // Promise: in a frame without fireflies the expected share of flagged pixel-buffers is at most
 // q (false_alarm): the first step's maximum of K is flagged with probability <= K q. Test
 // [buffers][calibration], simulator null scenes (gamma samples, shape 1 and 4, 8-16 samples
-// per buffer, three seeds, q = 1e-3): K = 4: 0.31 q (spread) / 0.39 q (variance); K = 8:
-// 0.30 q / 0.67 q. Not promised with use_variance at few samples per buffer of a renderer's
-// mixed per-sample laws (edges, shadows): the median of few-sample variances sits low, and
-// the tiny renderer example flags ~7% there (the spread, the default, stays at ~0.2%).
+// per buffer, three seeds, q = 1e-3): K = 4: 0.31 q (spread) / 0.17 q (variance); K = 8:
+// 0.30 q / 0.29 q. With use_variance at 8 samples per buffer of a renderer's mixed
+// per-sample laws (the tiny renderer example) 0.44% of the pixel-buffers are rebuilt, the
+// spread alone 0.19% (its caustic fireflies included).
 // Measured, relMSE against the reference (../shared/data/cycles-caustics-seeds, 8 Cycles
 // renders of 16 samples, no variance; 128 samples in all): mean 0.496; K = 4 (2 renders per
 // buffer): median of means 0.0326, G-MoN (best threshold) 0.0321, this 0.0249; K = 8: median of
@@ -178,7 +179,10 @@ inline double pixel_noise(const pixel_buffers& p, bool with_variance) noexcept {
             const double v = p.rel_var[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])];
             if (std::isfinite(v)) r[static_cast<std::size_t>(m++)] = v;
         }
-        return m == 0 ? nan : median_of(r.data(), m) / 9.0;
+        // Never below the spread: few-sample variances of skewed samples mostly sit low.
+        const double given = m == 0 ? nan : median_of(r.data(), m) / 9.0;
+        const double spread = pixel_noise(p, false);
+        return std::isnan(given) ? spread : std::isnan(spread) ? given : std::max(given, spread);
     }
     if (p.usable < 2) return nan;
     double sum = 0, ss = 0;
