@@ -18,3 +18,5 @@
 #include "cross_half.hpp"
 #include "parallel.hpp"
 #include "pipeline.hpp"
+#include "buffers.hpp"
+#include "accumulator.hpp"
