@@ -160,6 +160,146 @@ inline void advance(reconstruct_scratch& s) {
 
 }  // namespace detail
 
+namespace detail {
+
+// The two phases over one image pair; state, lists and staged values live in the scratch.
+template <class C, class V>
+class rebuilder {
+    using ct = channel_traits<std::remove_cv_t<C>>;
+    using vt = channel_traits<std::remove_cv_t<V>>;
+
+public:
+    rebuilder(const image_view<C>& color, const image_view<V>& variance, reconstruct_scratch& s, int radius)
+        : color_(color), variance_(variance), s_(s), w_(color.width()), h_(color.height()),
+          ncol_(color.channels()), nch_(color.channels() + (variance.empty() ? 0 : variance.channels())), r_(radius) {}
+
+    // Phase 1: rounds over the listed pixels (the first round all marked ones, then the
+    // frontier of the last). Returns how many pixels it set.
+    std::size_t fill(reconstruct_report& rep) {
+        std::size_t set = 0;
+        while (!s_.list_.empty()) {
+            s_.staged_.resize(s_.list_.size() * stride());
+            std::size_t kept = 0;  // entries that found a neighbour move to the front
+            for (std::size_t e = 0; e < s_.list_.size(); ++e)
+                if (filter_any(e)) {
+                    if (kept != e) {
+                        std::memmove(&s_.staged_[kept * stride()], &s_.staged_[e * stride()], sizeof(double) * stride());
+                        s_.list_[kept] = s_.list_[e];
+                    }
+                    ++kept;
+                }
+            if (kept == 0) break;
+            s_.list_.resize(kept);
+            ++rep.phase1_rounds;
+            for (std::size_t e = 0; e < kept; ++e) {
+                (void)commit(e);
+                s_.state_[s_.list_[e]] = 2;
+            }
+            set += kept;
+            for (const std::uint32_t p : s_.list_) queue_neighbours(p, w_, h_, r_, 1, s_);
+            advance(s_);
+        }
+        return set;
+    }
+
+    // Phase 2: Jacobi iterations over the known marked pixels with known marked neighbours,
+    // then over those next to a pixel that changed by more than the tolerance.
+    void settle(reconstruct_report& rep, const reconstruct_options& o) {
+        s_.next_.clear();
+        for (std::size_t p = 0; p < s_.state_.size(); ++p)  // state 2 pixels only: a byte scan
+            if (s_.state_[p] == 2 && has_known_neighbour(p)) s_.next_.push_back(static_cast<std::uint32_t>(p));
+        s_.list_.swap(s_.next_);
+        s_.next_.clear();
+        for (int it = 0; it < o.max_iterations && !s_.list_.empty(); ++it) {
+            s_.staged_.resize(s_.list_.size() * stride());
+            for (std::size_t e = 0; e < s_.list_.size(); ++e) (void)filter_any(e);
+            double change = 0.0;
+            for (std::size_t e = 0; e < s_.list_.size(); ++e) {
+                const double c = commit(e);
+                change = std::max(change, c);
+                if (c > o.tolerance) queue_neighbours(s_.list_[e], w_, h_, r_, 2, s_);
+            }
+            rep.phase2_iterations = it + 1;
+            rep.final_change = change;
+            advance(s_);
+        }
+        for (const std::uint32_t q : s_.list_) s_.state_[q] &= static_cast<std::uint8_t>(~reconstruct_scratch::queued);
+    }
+
+private:
+    std::size_t stride() const noexcept { return static_cast<std::size_t>(nch_); }
+    double load(int x, int y, int c) const {
+        return c < ncol_ ? ct::load(color_(x, y, c)) : vt::load(variance_(x, y, c - ncol_));
+    }
+    void store(int x, int y, int c, double v) const {
+        if (c < ncol_) color_(x, y, c) = ct::store(v);
+        else variance_(x, y, c - ncol_) = vt::store(v);
+    }
+    std::size_t at(int x, int y) const noexcept {
+        return static_cast<std::size_t>(y) * static_cast<std::size_t>(w_) + static_cast<std::size_t>(x);
+    }
+    // Sources and known marked pixels are read; queued flags do not change that.
+    bool readable(int x, int y) const {
+        const std::uint8_t st = s_.state_[at(x, y)] & static_cast<std::uint8_t>(~reconstruct_scratch::queued);
+        return st == 0 || st == 2;
+    }
+    bool has_known_neighbour(std::size_t p) const {
+        const int x = static_cast<int>(p % static_cast<std::size_t>(w_)), y = static_cast<int>(p / static_cast<std::size_t>(w_));
+        for (int yy = std::max(0, y - r_); yy <= std::min(h_ - 1, y + r_); ++yy)
+            for (int xx = std::max(0, x - r_); xx <= std::min(w_ - 1, x + r_); ++xx)
+                if ((xx != x || yy != y) && (s_.state_[at(xx, yy)] & 0x7f) == 2) return true;
+        return false;
+    }
+    // Weighted mean of list entry e's readable neighbours into staged; false when none.
+    template <int NC>
+    bool filter(std::size_t e) {
+        const std::size_t p = s_.list_[e];
+        const int x = static_cast<int>(p % static_cast<std::size_t>(w_)), y = static_cast<int>(p / static_cast<std::size_t>(w_));
+        double acc[16] = {};
+        const double wsum = kernel_sum<1, NC>(
+            s_.kernel_, x, y, w_, h_, nch_, [this](int xx, int yy) { return readable(xx, yy); },
+            [this](int xx, int yy, double* v) {
+                for (int c = 0; c < (NC > 0 ? NC : nch_); ++c) v[c] = load(xx, yy, c);
+            },
+            acc);
+        if (!(wsum > 0)) return false;
+        double* out = &s_.staged_[e * stride()];
+        for (int c = 0; c < nch_; ++c) out[c] = acc[c] / wsum;
+        return true;
+    }
+    bool filter_any(std::size_t e) {
+        switch (nch_) {  // common channel counts at compile time
+            case 3: return filter<3>(e);
+            case 4: return filter<4>(e);
+            case 6: return filter<6>(e);
+            case 7: return filter<7>(e);
+            case 8: return filter<8>(e);
+            default: return filter<0>(e);
+        }
+    }
+    // Writes entry e's staged values; returns the largest relative change.
+    double commit(std::size_t e) {
+        const std::size_t p = s_.list_[e];
+        const int x = static_cast<int>(p % static_cast<std::size_t>(w_)), y = static_cast<int>(p / static_cast<std::size_t>(w_));
+        double change = 0.0;
+        for (int c = 0; c < nch_; ++c) {
+            const double before = load(x, y, c);
+            store(x, y, c, s_.staged_[e * stride() + static_cast<std::size_t>(c)]);
+            const double after = load(x, y, c);
+            const double scale = std::max(std::fabs(before), std::fabs(after));
+            if (scale > 0 && std::isfinite(before)) change = std::max(change, std::fabs(after - before) / scale);
+        }
+        return change;
+    }
+
+    image_view<C> color_;
+    image_view<V> variance_;
+    reconstruct_scratch& s_;
+    int w_, h_, ncol_, nch_, r_;
+};
+
+}  // namespace detail
+
 // Reconstructs the pixels whose role is `rebuild`, in colour and, when not empty, variance.
 // role(mask[i]) is asked only for pixels with (mask[i] & interesting) != 0; the others are
 // sources. Every pixel not rebuilt is left bit-identical.
@@ -168,23 +308,18 @@ reconstruct_report reconstruct(const image_view<C>& color, const image_view<V>& 
                                const std::uint8_t* mask, const reconstruct_options& o,
                                reconstruct_scratch& s, std::uint8_t interesting, Role&& role) {
     static_assert(!std::is_const_v<C> && !std::is_const_v<V>, "reconstruct writes its images");
-    using ct = channel_traits<std::remove_cv_t<C>>;
-    using vt = channel_traits<std::remove_cv_t<V>>;
     reconstruct_report rep;
     if (status st = check_reconstruct_options(o); !st.ok()) {
         rep.error = st;
         return rep;
     }
-    const int w = color.width(), h = color.height();
     if (color.empty()) return rep;
     const bool has_var = !variance.empty();
     if (has_var && !same_size(color, variance)) {
         rep.error = status{errc::size_mismatch, "variance and colour differ in size"};
         return rep;
     }
-    const int ncol = color.channels(), nvar = has_var ? variance.channels() : 0;
-    const int nch = ncol + nvar;
-    if (nch > 16) {
+    if (color.channels() + (has_var ? variance.channels() : 0) > 16) {
         rep.error = status{errc::channel_mismatch, "reconstruct handles at most 16 channels in all"};
         return rep;
     }
@@ -197,141 +332,17 @@ reconstruct_report reconstruct(const image_view<C>& color, const image_view<V>& 
     detail::mark_roles(mask, npix, interesting, role, s);
     rep.pixels = s.list_.size();
     if (s.list_.empty()) return rep;
-
-    auto load = [&](int x, int y, int c) -> double {
-        return c < ncol ? ct::load(color(x, y, c)) : vt::load(variance(x, y, c - ncol));
-    };
-    auto store = [&](int x, int y, int c, double v) {
-        if (c < ncol) color(x, y, c) = ct::store(v);
-        else variance(x, y, c - ncol) = vt::store(v);
-    };
-    // Sources and known marked pixels are read; queued flags do not change that.
-    auto readable = [&](int xx, int yy) {
-        const std::uint8_t st = s.state_[static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) +
-                                         static_cast<std::size_t>(xx)] &
-                                static_cast<std::uint8_t>(~reconstruct_scratch::queued);
-        return st == 0 || st == 2;
-    };
-    // Weighted mean of list entry e's readable neighbours into staged; false when none.
-    auto filter = [&](std::size_t e, auto nc_const) -> bool {
-        constexpr int NC = decltype(nc_const)::value;
-        const std::size_t p = s.list_[e];
-        const int x = static_cast<int>(p % static_cast<std::size_t>(w));
-        const int y = static_cast<int>(p / static_cast<std::size_t>(w));
-        double acc[16] = {};
-        const double wsum = detail::kernel_sum<1, NC>(
-            s.kernel_, x, y, w, h, nch, readable,
-            [&](int xx, int yy, double* v) {
-                for (int c = 0; c < (NC > 0 ? NC : nch); ++c) v[c] = load(xx, yy, c);
-            },
-            acc);
-        if (!(wsum > 0)) return false;
-        double* out = &s.staged_[e * static_cast<std::size_t>(nch)];
-        for (int c = 0; c < nch; ++c) out[c] = acc[c] / wsum;
-        return true;
-    };
-    auto filter_any = [&](std::size_t e) -> bool {
-        switch (nch) {  // common channel counts at compile time
-            case 3: return filter(e, std::integral_constant<int, 3>{});
-            case 4: return filter(e, std::integral_constant<int, 4>{});
-            case 6: return filter(e, std::integral_constant<int, 6>{});
-            case 7: return filter(e, std::integral_constant<int, 7>{});
-            case 8: return filter(e, std::integral_constant<int, 8>{});
-            default: return filter(e, std::integral_constant<int, 0>{});
-        }
-    };
-    auto commit = [&](std::size_t e) -> double {  // write staged values, return rel. change
-        const std::size_t p = s.list_[e];
-        const int x = static_cast<int>(p % static_cast<std::size_t>(w));
-        const int y = static_cast<int>(p / static_cast<std::size_t>(w));
-        double change = 0.0;
-        for (int c = 0; c < nch; ++c) {
-            const double before = load(x, y, c);
-            store(x, y, c, s.staged_[e * static_cast<std::size_t>(nch) + static_cast<std::size_t>(c)]);
-            const double after = load(x, y, c);
-            const double scale = std::max(std::fabs(before), std::fabs(after));
-            if (scale > 0 && std::isfinite(before)) change = std::max(change, std::fabs(after - before) / scale);
-        }
-        return change;
-    };
     const int r = o.kernel_width / 2;
-
-    // Phase 1: the first round tries every marked pixel; later ones the frontier.
-    std::size_t pending = s.list_.size();
-    while (!s.list_.empty()) {
-        s.staged_.resize(s.list_.size() * static_cast<std::size_t>(nch));
-        std::size_t kept = 0;  // entries that found a neighbour move to the front
-        for (std::size_t e = 0; e < s.list_.size(); ++e)
-            if (filter_any(e)) {
-                if (kept != e) {
-                    std::memmove(&s.staged_[kept * static_cast<std::size_t>(nch)],
-                                 &s.staged_[e * static_cast<std::size_t>(nch)], sizeof(double) * static_cast<std::size_t>(nch));
-                    s.list_[kept] = s.list_[e];
-                }
-                ++kept;
-            }
-        if (kept == 0) break;
-        s.list_.resize(kept);
-        ++rep.phase1_rounds;
-        for (std::size_t e = 0; e < kept; ++e) {
-            (void)commit(e);
-            s.state_[s.list_[e]] = 2;
-        }
-        pending -= kept;
-        for (const std::uint32_t p : s.list_) detail::queue_neighbours(p, w, h, r, 1, s);
-        detail::advance(s);
-    }
-    if (pending > 0 && detail::fallback_to_excluded(s, w, h, r)) {
-        // Pixels no source can reach (a firefly inside a kept highlight region, say) may
-        // read the excluded pixels after all, rather than stay as they are.
-        while (!s.list_.empty()) {
-            s.staged_.resize(s.list_.size() * static_cast<std::size_t>(nch));
-            for (std::size_t e = 0; e < s.list_.size(); ++e) (void)filter_any(e);  // all succeed
-            ++rep.phase1_rounds;
-            for (std::size_t e = 0; e < s.list_.size(); ++e) {
-                (void)commit(e);
-                s.state_[s.list_[e]] = 2;
-            }
-            pending -= s.list_.size();
-            for (const std::uint32_t p : s.list_) detail::queue_neighbours(p, w, h, r, 1, s);
-            detail::advance(s);
-        }
-    }
+    detail::rebuilder<C, V> rb(color, variance, s, r);
+    std::size_t pending = rep.pixels - rb.fill(rep);
+    // Pixels no source can reach (a firefly inside a kept highlight region, say) may read
+    // the excluded pixels after all, rather than stay as they are.
+    if (pending > 0 && detail::fallback_to_excluded(s, color.width(), color.height(), r)) pending -= rb.fill(rep);
     if (pending > 0) {
         rep.unreachable = pending;
         rep.error = status{errc::no_valid_pixels, "pixels with no usable source anywhere were left as they were"};
     }
-
-    // Phase 2: first the known marked pixels that have known marked neighbours.
-    s.next_.clear();
-    for (std::size_t p = 0; p < npix; ++p)  // state 2 pixels only: a byte scan
-        if (s.state_[p] == 2) {
-            const int x = static_cast<int>(p % static_cast<std::size_t>(w));
-            const int y = static_cast<int>(p / static_cast<std::size_t>(w));
-            bool has = false;
-            for (int yy = std::max(0, y - r); yy <= std::min(h - 1, y + r) && !has; ++yy)
-                for (int xx = std::max(0, x - r); xx <= std::min(w - 1, x + r) && !has; ++xx)
-                    has = (xx != x || yy != y) &&
-                          (s.state_[static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(xx)] &
-                           0x7f) == 2;
-            if (has) s.next_.push_back(static_cast<std::uint32_t>(p));
-        }
-    s.list_.swap(s.next_);
-    s.next_.clear();
-    for (int it = 0; it < o.max_iterations && !s.list_.empty(); ++it) {
-        s.staged_.resize(s.list_.size() * static_cast<std::size_t>(nch));
-        for (std::size_t e = 0; e < s.list_.size(); ++e) (void)filter_any(e);
-        double change = 0.0;
-        for (std::size_t e = 0; e < s.list_.size(); ++e) {
-            const double c = commit(e);
-            change = std::max(change, c);
-            if (c > o.tolerance) detail::queue_neighbours(s.list_[e], w, h, r, 2, s);
-        }
-        rep.phase2_iterations = it + 1;
-        rep.final_change = change;
-        detail::advance(s);
-    }
-    for (const std::uint32_t q : s.list_) s.state_[q] &= static_cast<std::uint8_t>(~reconstruct_scratch::queued);
+    rb.settle(rep, o);
     return rep;
 }
 
