@@ -202,7 +202,8 @@ TEST_CASE("one thread and two threads give bit-identical outputs", "[pipeline][i
                         for (std::size_t i = n; i-- > 0;) t(i);  // reverse order on purpose
                     }));
     (void)hooked.process(c.h[0], c.h[1]);
-    CHECK(calls == 4);  // candidates, what to rebuild, the other half's estimates, the writes
+    CHECK(calls == 6);  // candidates, the local test (levels, bands of rows), what to rebuild,
+                        // the other half's estimates, the writes
     CHECK(std::memcmp(a.f.color[0].data(), c.f.color[0].data(), a.f.color[0].size() * 4) == 0);
 }
 

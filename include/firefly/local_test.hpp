@@ -81,6 +81,7 @@
 #include <vector>
 
 #include "image_view.hpp"
+#include "parallel.hpp"
 #include "status.hpp"
 #include "stddev.hpp"
 #include "student_t.hpp"
@@ -130,18 +131,29 @@ struct local_test_result {
     std::size_t spatial = 0;       // flags the spatial test added (not the pair test's)
 };
 
-// Memory reused across frames.
-struct local_test_scratch {
-    std::vector<double> level[2];  // mean colour; NaN where the pixel does not count
-    std::vector<float> rel_var[2]; // relative variance r of the half mean; NaN where unusable
+// What one band of rows needs of its own (bands run in parallel).
+struct local_band_scratch {
     std::vector<float> pool;
     std::vector<double> levels;      // the neighbourhood's levels (spatial test)
     std::vector<double> thresholds;  // t_df(q) by df grid step (see detail::t_threshold)
     double thresholds_q = 0;
+    local_test_result found;         // this band's flags and counts
     std::size_t bytes() const noexcept {
-        return (level[0].capacity() + level[1].capacity() + levels.capacity() + thresholds.capacity()) *
-                   sizeof(double) +
-               (rel_var[0].capacity() + rel_var[1].capacity() + pool.capacity()) * sizeof(float);
+        return (levels.capacity() + thresholds.capacity()) * sizeof(double) + pool.capacity() * sizeof(float) +
+               (found.half[0].index.capacity() + found.half[1].index.capacity()) * 8;
+    }
+};
+
+// Memory reused across frames.
+struct local_test_scratch {
+    std::vector<double> level[2];  // mean colour; NaN where the pixel does not count
+    std::vector<float> rel_var[2]; // relative variance r of the half mean; NaN where unusable
+    std::vector<local_band_scratch> bands;
+    std::size_t bytes() const noexcept {
+        std::size_t n = (level[0].capacity() + level[1].capacity()) * sizeof(double) +
+                        (rel_var[0].capacity() + rel_var[1].capacity()) * sizeof(float);
+        for (const auto& b : bands) n += b.bytes();
+        return n;
     }
 };
 
@@ -303,7 +315,7 @@ inline double pair_statistic(double hi, double lo, double r) noexcept {
 // t_df(q) with df rounded down to a grid of 64 steps per octave (from 1 to 2^34): a lower df
 // gives a higher threshold, so the rounding only makes the test a little stricter (df at most
 // 1.1% low), and the Newton iterations run once per grid step and sequence of frames.
-inline double t_threshold(local_test_scratch& s, double q, double df) {
+inline double t_threshold(local_band_scratch& s, double q, double df) {
     constexpr int steps = 64, octaves = 34;
     if (s.thresholds_q != q || s.thresholds.empty()) {
         s.thresholds.assign(steps * octaves + 1, 0.0);
@@ -408,8 +420,9 @@ inline double spatial_score(double hi, double lo, double m, const std::vector<do
 
 // One pixel, the brighter half hi: the pair test, then (options.spatial) the spatial test,
 // each at q / 2 when both run. Returns the score (> 1: flagged), 0 otherwise.
-inline double local_score(const local_test_options& o, const local_levels_q& k, local_test_scratch& s,
-                          local_test_result& res, int w, int h, int x, int y, int hi, bool& by_spatial) {
+inline double local_score(const local_test_options& o, const local_levels_q& k, const local_test_scratch& s,
+                          local_band_scratch& band, int w, int h, int x, int y, int hi, bool& by_spatial) {
+    local_test_result& res = band.found;
     const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
     const double l_hi = s.level[hi][i], l_lo = s.level[1 - hi][i];
     const double r_other = s.rel_var[1 - hi][i];
@@ -418,7 +431,7 @@ inline double local_score(const local_test_options& o, const local_levels_q& k, 
     // own r bounds T from above and the threshold from below; for the spatial test, the
     // level ratio must exceed 1 and Paulson's z at m = 1 / r_other must come near z_q.
     const double t_pair = pair_statistic(l_hi, l_lo, r_other);
-    const bool pair_may = t_pair > zq && t_pair > t_threshold(s, q, std::min(2.0 / r_other, 1e10));
+    const bool pair_may = t_pair > zq && t_pair > t_threshold(band, q, std::min(2.0 / r_other, 1e10));
     double mu = 0;
     bool spatial_may = false;
     if (o.spatial) {
@@ -427,63 +440,96 @@ inline double local_score(const local_test_options& o, const local_levels_q& k, 
         const double m_max = 1.0 / r_other, n = static_cast<double>(count);
         spatial_may = count >= static_cast<std::size_t>(o.min_neighbours) && sum > 0 && l_hi * n > sum &&
                       paulson_z(l_hi * n / sum, 2.0 * m_max, 2.0 * n * m_max) > zq - 1.0;
-        if (spatial_may) mu = neighbour_levels(s, w, h, x, y, o.radius, s.levels);
+        if (spatial_may) mu = neighbour_levels(s, w, h, x, y, o.radius, band.levels);
     }
     if (!pair_may && !spatial_may) return 0.0;
     ++res.screened;
-    const pooled_estimate pooled = pooled_relative_variance(s.rel_var, w, h, x, y, o.radius, o.min_neighbours, s.pool);
+    const pooled_estimate pooled = pooled_relative_variance(s.rel_var, w, h, x, y, o.radius, o.min_neighbours, band.pool);
     if (!(pooled.nu == pooled.nu)) return 0.0;
     const double r = std::max(pooled.r, r_other);
     if (pair_may) {
         const double t = pair_statistic(l_hi, l_lo, r);
         // t with 2m degrees of freedom for the gamma law, widened by the uncertainty of r~
         const double df = std::min(std::max(1.0 / (0.5 * r + 1.0 / pooled.nu), 1.0), 1e10);
-        const double threshold = t > zq ? t_threshold(s, q, df) : HUGE_VAL;
+        const double threshold = t > zq ? t_threshold(band, q, df) : HUGE_VAL;
         if (t > threshold) return t / threshold;
     }
     if (!spatial_may || !(mu > 0)) return 0.0;
     by_spatial = true;
-    return spatial_score(l_hi, l_lo, 1.0 / r, s.levels, mu, k);
+    return spatial_score(l_hi, l_lo, 1.0 / r, band.levels, mu, k);
+}
+
+// Rows [y0, y1) of the test into band.found.
+inline void local_rows(const local_test_options& o, const local_levels_q& k, const local_test_scratch& s,
+                       local_band_scratch& band, int w, int h, int y0, int y1) {
+    local_test_result& found = band.found;
+    for (auto& f : found.half) {
+        f.index.clear();
+        f.score.clear();
+    }
+    found.tested = found.screened = found.spatial = 0;
+    for (int y = y0; y < y1; ++y)
+        for (int x = 0; x < w; ++x) {
+            const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+            const float ra = s.rel_var[0][i], rb = s.rel_var[1][i];
+            if (!(ra == ra) || !(rb == rb)) continue;  // one half does not count, or not > 0
+            ++found.tested;
+            const double la = s.level[0][i], lb = s.level[1][i];
+            if (la == lb) continue;
+            const int hi = la > lb ? 0 : 1;  // the half that could hold a firefly
+            bool by_spatial = false;
+            const double score = local_score(o, k, s, band, w, h, x, y, hi, by_spatial);
+            if (!(score > 1.0)) continue;
+            found.half[hi].index.push_back(static_cast<std::uint32_t>(i));
+            found.half[hi].score.push_back(static_cast<float>(std::min(score, static_cast<double>(FLT_MAX))));
+            found.spatial += by_spatial;
+        }
 }
 
 }  // namespace detail
 
 // Runs the local test on both halves. Views must share size, channel counts as for
-// check_half_views. Returns the first problem found; result is then empty.
+// check_half_views. Returns the first problem found; result is then empty. exec runs the
+// two halves' level passes and 16 bands of rows as tasks: the result is the same for any executor.
 template <class C, class V, class A>
 status local_test(const local_half<C, V, A>& a, const local_half<C, V, A>& b, const local_test_options& options,
-                  local_test_scratch& scratch, local_test_result& result) {
+                  local_test_scratch& scratch, local_test_result& result, const executor& exec = {}) {
     for (auto& f : result.half) {
         f.index.clear();
         f.score.clear();
     }
-    result.tested = result.screened = 0;
+    result.tested = result.screened = result.spatial = 0;
     if (status st = check_local_test_options(options); !st.ok()) return st;
     if (status st = check_half_views(a.color, a.variance, a.alpha); !st.ok()) return st;
     if (status st = check_half_views(b.color, b.variance, b.alpha); !st.ok()) return st;
     if (!same_size(a.color, b.color)) return status{errc::size_mismatch, "local test: the halves differ in size"};
     if (a.color.pixel_count() >= (std::size_t{1} << 32))
         return status{errc::size_overflow, "local test: more than 2^32 pixels"};
-    detail::local_levels(a, options.variance_scale, scratch.level[0], scratch.rel_var[0]);
-    detail::local_levels(b, options.variance_scale, scratch.level[1], scratch.rel_var[1]);
+    const local_half<C, V, A>* halves[2] = {&a, &b};
+    exec.run(2, [&](std::size_t hh) {
+        detail::local_levels(*halves[hh], options.variance_scale, scratch.level[hh], scratch.rel_var[hh]);
+    });
+    // Bands of rows, each into its own list; joined in row order, so the result does not
+    // depend on the executor (nor on the number of bands).
     const int w = a.color.width(), h = a.color.height();
     const detail::local_levels_q k(options);
-    for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x) {
-            const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
-            const float ra = scratch.rel_var[0][i], rb = scratch.rel_var[1][i];
-            if (!(ra == ra) || !(rb == rb)) continue;  // one half does not count, or not > 0
-            ++result.tested;
-            const double la = scratch.level[0][i], lb = scratch.level[1][i];
-            if (la == lb) continue;
-            const int hi = la > lb ? 0 : 1;  // the half that could hold a firefly
-            bool by_spatial = false;
-            const double score = detail::local_score(options, k, scratch, result, w, h, x, y, hi, by_spatial);
-            if (!(score > 1.0)) continue;
-            result.half[hi].index.push_back(static_cast<std::uint32_t>(i));
-            result.half[hi].score.push_back(static_cast<float>(std::min(score, static_cast<double>(FLT_MAX))));
-            result.spatial += by_spatial;
+    const std::size_t bands = static_cast<std::size_t>(std::min(h, 16));
+    scratch.bands.resize(bands);
+    exec.run(bands, [&](std::size_t band) {
+        const int y0 = static_cast<int>(band * static_cast<std::size_t>(h) / bands);
+        const int y1 = static_cast<int>((band + 1) * static_cast<std::size_t>(h) / bands);
+        detail::local_rows(options, k, scratch, scratch.bands[band], w, h, y0, y1);
+    });
+    for (const local_band_scratch& band : scratch.bands) {
+        for (int hh = 0; hh < 2; ++hh) {
+            const local_flags& f = band.found.half[hh];
+            result.half[hh].index.insert(result.half[hh].index.end(), f.index.begin(), f.index.end());
+            result.half[hh].score.insert(result.half[hh].score.end(), f.score.begin(), f.score.end());
         }
+        result.tested += band.found.tested;
+        result.screened += band.found.screened;
+        result.spatial += band.found.spatial;
+    }
     return ok_status();
 }
 

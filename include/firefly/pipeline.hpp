@@ -586,7 +586,7 @@ private:
                              L{b.color, b.variance, b.alpha, halves_[1].label.data()}};
         local_test_options lo = options_.local;
         lo.variance_scale *= rep.variance_calibration;
-        if (!local_test(halves[0], halves[1], lo, local_scratch_, local_result_).ok()) return;  // options checked
+        if (!local_test(halves[0], halves[1], lo, local_scratch_, local_result_, exec_).ok()) return;  // options checked
         for (int h = 0; h < 2; ++h) {
             half_state& s = halves_[h];
             s.order.resize(rep.half[h].outliers);  // candidates past the ESD's count are not outliers
