@@ -444,6 +444,13 @@ private:
         });
     }
 
+    // The K buffers of pixel (x, y), read and sorted.
+    template <class C, class V>
+    static void gather(const buffer_view<C, V>* b, int k, int x, int y, bool has_var, detail::pixel_buffers& p) {
+        for (int i = 0; i < k; ++i) read_buffer(b[i], x, y, has_var, i, p);
+        sort_buffers(b, x, y, p);
+    }
+
     // Pass 1: every pixel's own noise (before anything is rebuilt).
     template <class C, class V>
     void noise_row(const buffer_view<C, V>* b, int k, bool has_var, bool with_var, int y) {
@@ -451,8 +458,7 @@ private:
         p.k = k;
         const int w = b[0].color.width();
         for (int x = 0; x < w; ++x) {
-            for (int i = 0; i < k; ++i) read_buffer(b[i], x, y, has_var, i, p);
-            sort_buffers(b, x, y, p);
+            gather(b, k, x, y, has_var, p);
             noise_[static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)] =
                 detail::pixel_noise(p, with_var);
         }
@@ -484,8 +490,7 @@ private:
         p.k = k;
         const int w = b[0].color.width();
         for (int x = 0; x < w; ++x) {
-            for (int i = 0; i < k; ++i) read_buffer(b[i], x, y, has_var, i, p);
-            sort_buffers(b, x, y, p);
+            gather(b, k, x, y, has_var, p);
             const int bad = k - p.usable;
             if (bad > k / 2) {
                 ++rc.left;
