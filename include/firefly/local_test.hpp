@@ -276,6 +276,7 @@ inline void median_and_mad(float* p, std::size_t n, double& med, double& mad) no
 struct pooled_estimate {
     double r = 0;
     double nu = std::numeric_limits<double>::quiet_NaN();
+    double typical = 0;  // exp(median log r): the neighbourhood's typical r, uncorrected
 };
 
 inline pooled_estimate pooled_relative_variance(const std::vector<float> (&rel_var)[2], int w, int h, int x, int y,
@@ -299,6 +300,7 @@ inline pooled_estimate pooled_relative_variance(const std::vector<float> (&rel_v
     // The sample relative variance of a skewed law is biased low: E[r^] ~ r (1 - r) for a
     // gamma law (skewness 2 sqrt(r N)); 1 + r undoes it to first order.
     const double r = std::exp(std::min(med + 0.5 * s * s, 700.0));
+    e.typical = std::exp(std::min(med, 700.0));
     e.r = r * (1.0 + std::min(r, 1.0));
     e.nu = s > 0 ? 4.0 * n / (3.141592653589793 * s * s) : HUGE_VAL;
     return e;

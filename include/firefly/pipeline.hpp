@@ -575,7 +575,7 @@ private:
         const detail::pooled_estimate e = detail::pooled_relative_variance(
             ls.rel_var, w, frame_height_, x, y, options_.local.radius, options_.local.min_neighbours, pool_);
         if (!(e.nu == e.nu)) return v;  // too few neighbours: the pixel's own variance
-        return std::max(v, e.r * level * level / calibration);
+        return std::max(v, e.typical * level * level / calibration);
     }
 
     // The local test's flags join the outliers (after the global ones in each half's list).
