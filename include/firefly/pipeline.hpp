@@ -564,10 +564,12 @@ private:
             }
     }
 
-    // The other half's variance at (x, y), but never below what its neighbourhood's relative
-    // variance (both halves, the pixel left out; local_test.hpp) predicts at its level: one
-    // pixel's variance from few heavy-tailed samples is often far too low, and a noisy pixel
-    // would then "exceed" its other half. Renderer units, like v.
+    // The other half's variance at (x, y), but never below what its neighbourhood's typical
+    // relative variance (the median over both halves, the pixel left out; local_test.hpp)
+    // predicts at its level: one pixel's variance from few heavy-tailed samples is often far
+    // too low, and a noisy pixel would then "exceed" its other half. The median, not the
+    // mean-corrected estimate: fireflies around the pixel inflate the spread that corrects it.
+    // Renderer units, like v.
     double noise_floor(int x, int y, double v, double level, double calibration) {
         const local_test_scratch& ls = local_scratch_;
         if (!options_.local_test || ls.rel_var[0].empty() || !(calibration > 0)) return v;
