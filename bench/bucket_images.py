@@ -12,16 +12,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 import firefly
-
-
-def read_pfm(path):
-    with open(path, "rb") as f:
-        kind = f.readline().strip()
-        w, h = map(int, f.readline().split())
-        scale = float(f.readline())
-        channels = 3 if kind == b"PF" else 1
-        data = np.frombuffer(f.read(), dtype="<f4" if scale < 0 else ">f4")
-    return data.reshape(h, w, channels)[::-1].astype(np.float32)  # PFM rows run bottom-up
+from pfm_io import read_pfm
 
 
 def write_png(path, rgb, crop, zoom=3):

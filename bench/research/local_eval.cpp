@@ -239,7 +239,7 @@ void run(const char* name, const frame_data& d, bool sweep) {
 }  // namespace
 
 int main(int argc, char** argv) {
-    const std::string data = argc > 1 ? argv[1] : "/work/shared/data";
+    const std::string data = argc > 1 ? argv[1] : "../shared/data";  // from the repository root
     for (const char* name : {"cycles-caustics", "cycles-interior"}) {
         frame_data d;
         const std::string dir = data + "/" + name + "/";

@@ -29,22 +29,17 @@ share of changed pixels that end up worse than the input.
 
 Usage: python3 bench/research/local_stats.py [--quick]
 """
+import os
 import sys
 import numpy as np
 from scipy import stats
 
-DATA = "/work/shared/data"
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+from pfm_io import read_pfm  # noqa: E402
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+DATA = os.path.normpath(os.path.join(HERE, "..", "..", "..", "shared", "data"))
 Q = 1e-4  # per-pixel false-alarm target of the calibrated tests (a, d)
-
-
-def read_pfm(path):
-    with open(path, "rb") as f:
-        magic = f.readline().strip()
-        w, h = map(int, f.readline().split())
-        scale = float(f.readline())
-        c = 3 if magic == b"PF" else 1
-        data = np.frombuffer(f.read(), dtype="<f4" if scale < 0 else ">f4")
-    return data.reshape(h, w, c)[::-1].astype(np.float64)
 
 
 def neighbours(x, r):
@@ -224,7 +219,7 @@ def relmse(img, ref):
 
 def eval_real(name):
     d = f"{DATA}/{name}"
-    cA, vA3, cB, vB3, ref = (read_pfm(f"{d}/{f}.pfm") for f in ("a_color", "a_variance", "b_color", "b_variance", "reference"))
+    cA, vA3, cB, vB3, ref = (read_pfm(f"{d}/{f}.pfm", np.float64) for f in ("a_color", "a_variance", "b_color", "b_variance", "reference"))
     LA, vA = reduce(cA, vA3)
     LB, vB = reduce(cB, vB3)
     inp = 0.5 * (cA + cB)
