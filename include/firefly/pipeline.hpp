@@ -257,7 +257,6 @@ private:
                      const image_view<std::uint8_t>& mask_a, const image_view<std::uint8_t>& mask_b, bool clean) {
         frame_report rep;
         if (status st = check_inputs(a, b, mask_a, mask_b); !st.ok()) return fail(rep, st);
-        frame_height_ = a.color.height();
         const half_buffer<C, V, A>* hb[2] = {&a, &b};
         const image_view<std::uint8_t>* masks[2] = {&mask_a, &mask_b};
         // Stage 1 (parallel): standard deviations, bound, ESD candidates, per half.
@@ -495,8 +494,8 @@ private:
             // A firefly may sit on top of a highlight in one half: that half then exceeds the
             // other by far more than the other's noise. It is rebuilt, and the other half is
             // judged on its own (as if both halves held its value).
-            const bool a_over = ho.min_excess_z > 0 && exceeds_other_half(ho, la, lb, noise_floor(x, y, vb, lb, calibration), calibration);
-            const bool b_over = ho.min_excess_z > 0 && exceeds_other_half(ho, lb, la, noise_floor(x, y, va, la, calibration), calibration);
+            const bool a_over = ho.min_excess_z > 0 && exceeds_other_half(ho, la, lb, noise_floor(x, y, w, hgt, vb, lb, calibration), calibration);
+            const bool b_over = ho.min_excess_z > 0 && exceeds_other_half(ho, lb, la, noise_floor(x, y, w, hgt, va, la, calibration), calibration);
             const bool kept = a_over   ? is_highlight(ho, lb, lb, vb, vb, calibration, cluster)
                               : b_over ? is_highlight(ho, la, la, va, va, calibration, cluster)
                                        : is_highlight(ho, la, lb, va, vb, calibration, cluster);
@@ -558,7 +557,7 @@ private:
                     continue;
                 }
                 const double l_other = mean_colour(hb[1 - h]->color, x, y);
-                const double v_other = noise_floor(x, y, reduced_variance(hb[1 - h]->variance, x, y), l_other, cal);
+                const double v_other = noise_floor(x, y, w, a.color.height(), reduced_variance(hb[1 - h]->variance, x, y), l_other, cal);
                 if (!exceeds_other_half(options_.highlight, mean_colour(hb[h]->color, x, y), l_other, v_other, cal))
                     lab[h][i] |= consistent_bit;
             }
@@ -570,12 +569,11 @@ private:
     // too low, and a noisy pixel would then "exceed" its other half. The median, not the
     // mean-corrected estimate: fireflies around the pixel inflate the spread that corrects it.
     // Renderer units, like v.
-    double noise_floor(int x, int y, double v, double level, double calibration) {
+    double noise_floor(int x, int y, int w, int h, double v, double level, double calibration) {
         const local_test_scratch& ls = local_scratch_;
         if (!options_.local_test || ls.rel_var[0].empty() || !(calibration > 0)) return v;
-        const int w = static_cast<int>(ls.rel_var[0].size() / static_cast<std::size_t>(frame_height_));
         const detail::pooled_estimate e = detail::pooled_relative_variance(
-            ls.rel_var, w, frame_height_, x, y, options_.local.radius, options_.local.min_neighbours, pool_);
+            ls.rel_var, w, h, x, y, options_.local.radius, options_.local.min_neighbours, pool_);
         if (!(e.nu == e.nu)) return v;  // too few neighbours: the pixel's own variance
         return std::max(v, e.typical * level * level / calibration);
     }
@@ -737,7 +735,6 @@ private:
     local_test_scratch local_scratch_;
     local_test_result local_result_;
     std::vector<float> pool_;  // neighbourhood scratch of noise_floor
-    int frame_height_ = 1;
 };
 
 // The final image of a frame, (A + B) / 2, and the variance of that mean, (vA + vB) / 4.
