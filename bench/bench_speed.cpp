@@ -19,6 +19,7 @@
 #include <firefly/firefly.hpp>
 #include <firefly/sim/scene.hpp>
 
+#include "half_float.hpp"
 #include "pfm.hpp"
 
 #include <algorithm>
@@ -362,6 +363,90 @@ void target_rebuild_density(benchmark::State& st, int w, int h) {
 }
 
 // ---------------------------------------------------------------------------------------------
+// Layouts: detection on one frame held in the layouts renderers use, interleaved in one case,
+// each as a ratio to packed RGB float (target: within 1.3x).
+
+// One half in every layout: the views, over storage of their own.
+struct layout_half {
+    std::vector<float> planar_c, planar_v, rgba, rgba_v, padded_c, padded_v, rounded_c, rounded_v;
+    std::vector<firefly_examples::half16> half_c, half_v;
+    half_buffer<const float> planar, rgba_view, padded, rounded;  // rounded: the half values as packed floats
+    half_buffer<const firefly_examples::half16> half;
+    layout_half(const std::vector<float>& c, const std::vector<float>& v, int w, int h) {
+        const std::size_t n = static_cast<std::size_t>(w) * h, pad = 16;  // floats per padded row
+        planar_c.resize(n * 3);
+        planar_v.resize(n * 3);
+        rgba.resize(n * 4);
+        rgba_v.assign(n * 4, 0.0f);  // RGBA variance too: colour and variance channels match
+        padded_c.assign((static_cast<std::size_t>(w) * 3 + pad) * h, 0.0f);
+        padded_v.assign(padded_c.size(), 0.0f);
+        for (std::size_t i = 0; i < n; ++i)
+            for (std::size_t k = 0; k < 3; ++k) {
+                planar_c[k * n + i] = c[i * 3 + k];
+                planar_v[k * n + i] = v[i * 3 + k];
+                rgba[i * 4 + k] = c[i * 3 + k];
+                rgba[i * 4 + 3] = 1.0f;
+                rgba_v[i * 4 + k] = v[i * 3 + k];
+                const std::size_t y = i / static_cast<std::size_t>(w), x = i % static_cast<std::size_t>(w);
+                padded_c[y * (w * 3 + pad) + x * 3 + k] = c[i * 3 + k];
+                padded_v[y * (w * 3 + pad) + x * 3 + k] = v[i * 3 + k];
+            }
+        for (float x : c) half_c.push_back(firefly_examples::to_half(x));
+        for (float x : v) half_v.push_back(firefly_examples::to_half(x));
+        for (auto x : half_c) rounded_c.push_back(firefly_examples::to_float(x));
+        for (auto x : half_v) rounded_v.push_back(firefly_examples::to_float(x));
+        rounded = {*make_image_view(static_cast<const float*>(rounded_c.data()), w, h, 3),
+                   *make_image_view(static_cast<const float*>(rounded_v.data()), w, h, 3), {}};
+        const auto row = static_cast<std::ptrdiff_t>((static_cast<std::size_t>(w) * 3 + pad) * sizeof(float));
+        planar = {*make_planar_view(static_cast<const float*>(planar_c.data()), w, h, 3),
+                  *make_planar_view(static_cast<const float*>(planar_v.data()), w, h, 3), {}};
+        rgba_view = {*make_image_view(static_cast<const float*>(rgba.data()), w, h, 4),
+                     *make_image_view(static_cast<const float*>(rgba_v.data()), w, h, 4), {}};
+        padded = {*make_image_view(static_cast<const float*>(padded_c.data()), w, h, 3, row),
+                  *make_image_view(static_cast<const float*>(padded_v.data()), w, h, 3, row), {}};
+        half = {*make_image_view(static_cast<const firefly_examples::half16*>(half_c.data()), w, h, 3),
+                *make_image_view(static_cast<const firefly_examples::half16*>(half_v.data()), w, h, 3), {}};
+    }
+};
+
+template <class T>
+double detect_ms(detector& d, const half_buffer<const T>& a, const half_buffer<const T>& b) {
+    const auto t0 = clock_type::now();
+    const frame_report r = d.detect(a, b);
+    benchmark::DoNotOptimize(r);
+    return ms_since(t0);
+}
+
+void layouts(benchmark::State& st, std::string scene, int w, int h) {
+    const frame_data* f = frame_of(scene, w, h);
+    working_copy c(*f);
+    const layout_half l[2] = {{f->col[0], f->var[0], w, h}, {f->col[1], f->var[1], w, h}};
+    detector d;
+    (void)d.detect(c.view[0], c.view[1]);  // warm: lambdas and scratch
+    double ms[6] = {};
+    for (auto _ : st) {
+        const double packed = detect_ms(d, c.view[0], c.view[1]);
+        ms[0] += packed;
+        ms[1] += detect_ms(d, l[0].planar, l[1].planar);
+        ms[2] += detect_ms(d, l[0].rgba_view, l[1].rgba_view);
+        ms[3] += detect_ms(d, l[0].padded, l[1].padded);
+        ms[4] += detect_ms(d, l[0].half, l[1].half);
+        ms[5] += detect_ms(d, l[0].rounded, l[1].rounded);  // half's values differ: its own baseline
+        st.SetIterationTime(packed / 1e3);
+    }
+    const char* names[5] = {"packed_ms", "x_planar", "x_rgba", "x_strided", "x_half"};
+    st.counters[names[0]] = ms[0] / static_cast<double>(st.iterations());
+    double worst = 0;
+    for (int i = 1; i < 5; ++i) {
+        const double x = ms[i] / ms[i == 4 ? 5 : 0];
+        st.counters[names[i]] = x;
+        worst = std::max(worst, x);
+    }
+    st.counters["target"] = 1.3;
+    st.counters["met"] = worst <= 1.3;
+}
+
+// ---------------------------------------------------------------------------------------------
 // Registration
 
 struct size2 {
@@ -408,6 +493,10 @@ int register_all() {
         std::fprintf(stderr, "note: %s/cycles-caustics not found: the Cycles cases are skipped\n",
                      FIREFLY_SHARED_DATA);
     }
+    for (size2 s : {small, k2})
+        benchmark::RegisterBenchmark(("layouts/caustics/" + s.label()).c_str(), layouts, "caustics", s.w, s.h)
+            ->UseManualTime()
+            ->Unit(benchmark::kMillisecond);
     add_frame("failed_bucket", k2, false, false, true);
     add_frame("no_bucket", k2, false, false, false);
     add_frame("dense30", k2, false, true, true);

@@ -10,64 +10,12 @@
 #include <thread>
 #include <vector>
 
+#include "../examples/half_float.hpp"
 #include "catch.hpp"
 
-namespace {
-
-// A minimal IEEE binary16 type, standing in for a renderer's half (Imath::half and the like).
-struct half16 {
-    std::uint16_t bits = 0;
-};
-half16 to_half(float f) {  // round to nearest even; enough range for the test's values
-    std::uint32_t x;
-    std::memcpy(&x, &f, 4);
-    const std::uint32_t sign = (x >> 16) & 0x8000u;
-    const int e = static_cast<int>((x >> 23) & 0xff) - 127 + 15;
-    std::uint32_t m = x & 0x7fffffu;
-    if (e <= 0) return {static_cast<std::uint16_t>(sign)};  // flush tiny values to zero
-    if (e >= 31) return {static_cast<std::uint16_t>(sign | 0x7c00u)};
-    std::uint32_t h = sign | (static_cast<std::uint32_t>(e) << 10) | (m >> 13);
-    const std::uint32_t rest = m & 0x1fffu;
-    if (rest > 0x1000u || (rest == 0x1000u && (h & 1u))) ++h;
-    return {static_cast<std::uint16_t>(h)};
-}
-float to_float(half16 v) {
-    const std::uint32_t sign = static_cast<std::uint32_t>(v.bits & 0x8000u) << 16;
-    const int e = (v.bits >> 10) & 0x1f;
-    const std::uint32_t m = v.bits & 0x3ffu;
-    std::uint32_t x;
-    if (e == 0) {
-        const float f = std::ldexp(static_cast<float>(m), -24);
-        std::memcpy(&x, &f, 4);
-        x |= sign;
-    } else if (e == 31) {
-        x = sign | 0x7f800000u | (m << 13);
-    } else {
-        x = sign | (static_cast<std::uint32_t>(e - 15 + 127) << 23) | (m << 13);
-    }
-    float f;
-    std::memcpy(&f, &x, 4);
-    return f;
-}
-
-}  // namespace
-
-namespace {
-std::size_t rows_converted = 0;  // how often the bulk hook ran
-}
-
-// The traits hook: how one half16 channel reads and writes as double, and (optional, the
-// fast path of the standard-deviation pass) how a run of them converts to float.
-template <>
-struct firefly::channel_traits<half16> {
-    static constexpr bool is_specialized = true;
-    static double load(half16 v) noexcept { return ::to_float(v); }
-    static half16 store(double v) noexcept { return to_half(static_cast<float>(v)); }
-    static void to_float(const half16* in, float* out, std::size_t n) noexcept {
-        ++rows_converted;
-        for (std::size_t i = 0; i < n; ++i) out[i] = ::to_float(in[i]);
-    }
-};
+using firefly_examples::half16;
+using firefly_examples::to_half;
+using firefly_examples::to_float;
 
 using namespace firefly;
 
@@ -209,11 +157,13 @@ TEST_CASE("float colour, half-float variance and a double alpha buffer", "[integ
         hb[k].alpha = *make_image_view(static_cast<const double*>(alpha.data()), w, h, 1);
     }
     detector d;
-    rows_converted = 0;
+    firefly_examples::half16_rows_converted = 0;
     const frame_report r = d.process(hb[0], hb[1]);
     REQUIRE(r.ok());
-    CHECK(rows_converted == 0);  // a double alpha: value by value through the traits
-    // without alpha (or with float alpha) the fast path converts each row once
+    // Rows converted in bulk: the local test's levels convert each row of each half once; the
+    // standard-deviation pass goes value by value with a double alpha ...
+    CHECK(firefly_examples::half16_rows_converted == static_cast<std::size_t>(2 * h));
+    // ... and without alpha (or with float alpha) takes the fast path: each row once more
     std::vector<float> col2[2] = {f.color[0], f.color[1]};
     std::vector<half16> var2[2];
     half_buffer<float, half16, const float> hf[2];
@@ -222,10 +172,10 @@ TEST_CASE("float colour, half-float variance and a double alpha buffer", "[integ
         hf[k].color = *make_image_view(col2[k].data(), w, h, 3);
         hf[k].variance = *make_image_view(var2[k].data(), w, h, 3);
     }
-    rows_converted = 0;
+    firefly_examples::half16_rows_converted = 0;
     detector d2;
     REQUIRE(d2.process(hf[0], hf[1]).ok());
-    CHECK(rows_converted == static_cast<std::size_t>(2 * h));
+    CHECK(firefly_examples::half16_rows_converted == static_cast<std::size_t>(4 * h));
     for (int k = 0; k < 2; ++k) CHECK(col2[k] == col[k]);  // both paths: the same bits
     // the same detections as the all-float run; values to the rounding of half storage
     std::size_t differ = 0;
@@ -278,4 +228,44 @@ TEST_CASE("the report and the masks, as a denoiser would use them", "[integratio
     CHECK(other > 0);  // pixels whose halves are now correlated: a denoiser's cross-validation skips them
     CHECK(changed > 0);
     CHECK(changed_unmarked == 0);  // every change is marked
+}
+
+TEST_CASE("half colour and variance: the bulk row path and value-by-value loading agree", "[integration]") {
+    const int w = 80, h = 70, pad = 5;  // padded rows are not packed: value by value
+    const sim::frame f = scene(w, h);
+    std::vector<half16> packed[2][2], padded[2][2];
+    half_buffer<const half16> fast[2], slow[2];
+    const std::vector<float>* src[2][2] = {{&f.color[0], &f.variance[0]}, {&f.color[1], &f.variance[1]}};
+    for (int k = 0; k < 2; ++k)
+        for (int j = 0; j < 2; ++j) {
+            for (const float v : *src[k][j]) packed[k][j].push_back(to_half(v));
+            padded[k][j].assign(static_cast<std::size_t>(w * 3 + pad) * h, half16{});
+            for (int y = 0; y < h; ++y)
+                std::copy_n(&packed[k][j][static_cast<std::size_t>(y) * w * 3], w * 3,
+                            &padded[k][j][static_cast<std::size_t>(y) * (w * 3 + pad)]);
+        }
+    const auto row = static_cast<std::ptrdiff_t>((w * 3 + pad) * sizeof(half16));
+    for (int k = 0; k < 2; ++k) {
+        fast[k] = {*make_image_view(static_cast<const half16*>(packed[k][0].data()), w, h, 3),
+                   *make_image_view(static_cast<const half16*>(packed[k][1].data()), w, h, 3), {}};
+        slow[k] = {*make_image_view(static_cast<const half16*>(padded[k][0].data()), w, h, 3, row),
+                   *make_image_view(static_cast<const half16*>(padded[k][1].data()), w, h, 3, row), {}};
+    }
+    std::vector<std::uint8_t> m[2][2];
+    frame_report r[2];
+    for (int p = 0; p < 2; ++p) {
+        for (auto& v : m[p]) v.assign(f.pixels(), 0);
+        detector d;
+        const half_buffer<const half16>* hb = p == 0 ? fast : slow;
+        firefly_examples::half16_rows_converted = 0;
+        r[p] = d.detect(hb[0], hb[1], *make_image_view(m[p][0].data(), w, h), *make_image_view(m[p][1].data(), w, h));
+        REQUIRE(r[p].ok());
+        CHECK((firefly_examples::half16_rows_converted > 0) == (p == 0));
+    }
+    CHECK(r[0].half[0].fireflies > 0);
+    for (int k = 0; k < 2; ++k) {
+        CHECK(m[0][k] == m[1][k]);
+        CHECK(r[0].half[k].outliers == r[1].half[k].outliers);
+        CHECK(r[0].half[k].median == r[1].half[k].median);
+    }
 }

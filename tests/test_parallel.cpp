@@ -126,8 +126,10 @@ TEST_CASE("the pool is destroyed cleanly, idle or never used", "[parallel]") {
 }
 
 TEST_CASE("the detector gives the same bytes for serial, threads(2) and threads(4)", "[parallel][pipeline]") {
-    for (const char* name : {"caustics", "failed_bucket", "production"}) {
-        const sim::scene s = sim::named_scene(name, 192, 128, 11);
+    // dense30 at 320x240: past one chunk of the outlier lists (4096) and one row band (64).
+    for (const char* name : {"caustics", "failed_bucket", "production", "dense30"}) {
+        const bool big = std::strcmp(name, "dense30") == 0;
+        const sim::scene s = sim::named_scene(name, big ? 320 : 192, big ? 240 : 128, 11);
         const cleaned serial = clean_with(s, executor::serial());
         REQUIRE(serial.r.half[0].fireflies + serial.r.half[1].fireflies > 0);
         for (unsigned n : {2u, 4u}) {

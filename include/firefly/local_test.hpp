@@ -82,8 +82,8 @@
 
 #include "image_view.hpp"
 #include "parallel.hpp"
-#include "status.hpp"
 #include "stddev.hpp"
+#include "status.hpp"
 #include "student_t.hpp"
 
 namespace firefly {
@@ -218,12 +218,27 @@ void local_levels(const local_half<C, V, A>& h, double scale, std::vector<double
     const strided<const A> al(h.alpha);
     using atraits = channel_traits<std::remove_cv_t<A>>;
     const auto valid = static_cast<std::uint8_t>(pixel_class::valid);
-    for (int y = 0; y < ht; ++y)
+    // Packed rows of a converting type (a renderer's half) are read as float rows, converted
+    // in bulk: the same values as loading one by one.
+    constexpr bool convert = (float_rows_v<C> && float_rows_v<V>) &&
+                             !(std::is_same_v<std::remove_cv_t<C>, float> && std::is_same_v<std::remove_cv_t<V>, float>);
+    const bool rows = convert && h.color.is_packed() && h.variance.is_packed();
+    std::vector<float> crow, vrow;
+    for (int y = 0; y < ht; ++y) {
+        const float* fc = nullptr;
+        const float* fv = nullptr;
+        if constexpr (convert) {
+            if (rows) {
+                fc = float_row(h.color, y, crow);
+                fv = float_row(h.variance, y, vrow);
+            }
+        }
+        const int cc = h.color.channels(), vc = h.variance.channels();
         for (int x = 0; x < w; ++x) {
             const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
-            const C* pc = col.p + y * col.y + x * col.x;
-            const V* pv = var.p + y * var.y + x * var.x;
-            bool counts = local_pixel(pc, col.c, pv, var.c, nc, one_var, scale, level[i], rel_var[i]);
+            bool counts = rows ? local_pixel(fc + x * cc, 1, fv + x * vc, 1, nc, one_var, scale, level[i], rel_var[i])
+                               : local_pixel(col.p + y * col.y + x * col.x, col.c, var.p + y * var.y + x * var.x,
+                                             var.c, nc, one_var, scale, level[i], rel_var[i]);
             if (h.label) {
                 counts &= (h.label[i] & pixel_class_bits) == valid;
             } else if (!h.alpha.empty()) {
@@ -235,6 +250,7 @@ void local_levels(const local_half<C, V, A>& h, double scale, std::vector<double
                 rel_var[i] = std::numeric_limits<float>::quiet_NaN();
             }
         }
+    }
 }
 
 // Median and median absolute deviation of p[0..n) (n >= 1, at most a few dozen values),

@@ -191,7 +191,7 @@ public:
                  h.select.capacity() * sizeof(double) + h.order.capacity() * sizeof(std::uint32_t) +
                  h.removed.capacity() * sizeof(double) + h.keys.capacity() * sizeof(std::uint64_t) +
                  (h.fix.capacity() + h.cross.capacity()) * sizeof(std::uint32_t) +
-                 h.cross_values.capacity() * sizeof(double) + h.recon.bytes();
+                 h.cross_values.capacity() * sizeof(double) + h.decision.capacity() + h.recon.bytes();
         return n;
     }
 
@@ -238,8 +238,12 @@ private:
         std::vector<std::uint32_t> fix;      // pixels to rebuild, row-major
         std::vector<std::uint32_t> cross;    // those rebuilt from the other half
         std::vector<double> cross_values;    // their new values, entry x channel
+        std::vector<std::uint8_t> decision;  // per entry of a list: its outcome (chunked stages)
+        std::vector<stddev_counts> band_counts;  // the standard-deviation pass per row band
         reconstruct_scratch recon;
     };
+
+    static constexpr int band_rows = 64;  // row bands of the full-frame passes: tasks for any pool
 
     static frame_report& fail(frame_report& r, status st) {
         r.error = st;
@@ -261,7 +265,8 @@ private:
         const image_view<std::uint8_t>* masks[2] = {&mask_a, &mask_b};
         // Stage 1 (parallel): standard deviations, bound, ESD candidates, per half.
         detail::stage_clock clock(rep.stage_ms);
-        exec_.run(2, [&](std::size_t h) { detect_candidates(*hb[h], halves_[h], rep.half[h]); });
+        stddev_bands(hb);
+        exec_.run(2, [&](std::size_t h) { detect_candidates(halves_[h], rep.half[h]); });
         clock.lap(frame_report::candidates);
         // Stage 2 (serial): the ESD decision, reading and filling the lambda cache.
         {
@@ -282,7 +287,7 @@ private:
         // before any is written; then writes, spatial reconstruction and masks.
         const bool cross = clean && options_.rebuild == rebuild_source::other_half;
         if (cross)
-            exec_.run(2, [&](std::size_t h) { stage_cross_half(*hb[h], *hb[1 - h], halves_[h], halves_[1 - h], rep); });
+            for (int h = 0; h < 2; ++h) stage_cross_half(*hb[h], *hb[1 - h], halves_[h], halves_[1 - h], rep);
         clock.lap(frame_report::other_half);
         exec_.run(2, [&](std::size_t h) { finish(*hb[h], halves_[h], *masks[h], rep.half[h], clean, cross); });
         clock.lap(frame_report::rebuild);
@@ -339,12 +344,36 @@ private:
     }
 
     template <class C, class V, class A>
-    void detect_candidates(const half_buffer<C, V, A>& hb, half_state& s, half_report& r) {
-        const std::size_t n = hb.color.pixel_count();
-        s.sd.resize(n);
-        s.label.resize(n);
-        const stddev_counts c =
-            detail::stddev_pass(hb.color, hb.variance, hb.alpha, options_.reduction, s.sd.data(), s.label.data());
+    void stddev_bands(const half_buffer<C, V, A>* const* hb) {
+        const int h = hb[0]->color.height(), w = hb[0]->color.width();
+        const std::size_t bands = static_cast<std::size_t>((h + band_rows - 1) / band_rows);
+        for (half_state& s : halves_) {
+            s.sd.resize(hb[0]->color.pixel_count());
+            s.label.resize(s.sd.size());
+            s.band_counts.assign(bands, stddev_counts{});
+        }
+        exec_.run(2 * bands, [&](std::size_t t) {
+            const std::size_t half = t / bands, band = t % bands;
+            const int y0 = static_cast<int>(band) * band_rows, rows = std::min(band_rows, h - y0);
+            const half_buffer<C, V, A>& b = *hb[half];
+            half_state& s = halves_[half];
+            const std::size_t at = index(0, y0, w);
+            s.band_counts[band] = detail::stddev_pass(
+                *b.color.subview(0, y0, w, rows), *b.variance.subview(0, y0, w, rows),
+                b.alpha.empty() ? b.alpha : *b.alpha.subview(0, y0, w, rows), options_.reduction, s.sd.data() + at,
+                s.label.data() + at);
+        });
+    }
+
+    void detect_candidates(half_state& s, half_report& r) {
+        const std::size_t n = s.sd.size();
+        stddev_counts c;
+        for (const stddev_counts& b : s.band_counts) {
+            c.valid += b.valid;
+            c.ignored += b.ignored;
+            c.nonfinite += b.nonfinite;
+            c.negative_variance += b.negative_variance;
+        }
         s.hist.build(s.sd.data(), n);
         r.pixels = n;
         r.valid = c.valid;
@@ -494,8 +523,8 @@ private:
             // A firefly may sit on top of a highlight in one half: that half then exceeds the
             // other by far more than the other's noise. It is rebuilt, and the other half is
             // judged on its own (as if both halves held its value).
-            const bool a_over = ho.min_excess_z > 0 && exceeds_other_half(ho, la, lb, noise_floor(x, y, w, hgt, vb, lb, calibration), calibration);
-            const bool b_over = ho.min_excess_z > 0 && exceeds_other_half(ho, lb, la, noise_floor(x, y, w, hgt, va, la, calibration), calibration);
+            const bool a_over = ho.min_excess_z > 0 && exceeds_other_half(ho, la, lb, noise_floor(x, y, w, hgt, vb, lb, calibration, pool_), calibration);
+            const bool b_over = ho.min_excess_z > 0 && exceeds_other_half(ho, lb, la, noise_floor(x, y, w, hgt, va, la, calibration, pool_), calibration);
             const bool kept = a_over   ? is_highlight(ho, lb, lb, vb, vb, calibration, cluster)
                               : b_over ? is_highlight(ho, la, la, va, va, calibration, cluster)
                                        : is_highlight(ho, la, lb, va, vb, calibration, cluster);
@@ -544,23 +573,42 @@ private:
         const double cal = rep.variance_calibration;
         const highlight_rule rule = options_.highlight.rule;
         const bool judges_confidence = rule == highlight_rule::confident || rule == highlight_rule::confident_and_agree;
-        for (int h = 0; h < 2; ++h)
-            for (std::size_t j = 0; j < rep.half[h].outliers - rep.half[h].local; ++j) {  // local flags
-                const std::uint32_t i = halves_[h].order[j];  // exceed the other half already
-                if (lab[1 - h][i] & outlier_bit) continue;  // a pair, decided above
-                const int x = static_cast<int>(i % static_cast<std::uint32_t>(w));
-                const int y = static_cast<int>(i / static_cast<std::uint32_t>(w));
-                if (cls(lab[1 - h][i]) == nonfinite_class) {
-                    const double l = mean_colour(hb[h]->color, x, y), v = reduced_variance(hb[h]->variance, x, y);
-                    if (judges_confidence && is_highlight(options_.highlight, l, l, v, v, cal))
-                        lab[h][i] |= highlight_bit;
-                    continue;
-                }
-                const double l_other = mean_colour(hb[1 - h]->color, x, y);
-                const double v_other = noise_floor(x, y, w, a.color.height(), reduced_variance(hb[1 - h]->variance, x, y), l_other, cal);
-                if (!exceeds_other_half(options_.highlight, mean_colour(hb[h]->color, x, y), l_other, v_other, cal))
-                    lab[h][i] |= consistent_bit;
+        // The bit each outlier gains (or 0), decided from labels that no decision changes, in
+        // chunks across the executor; then written.
+        auto decide = [&](int h, std::uint32_t i, std::vector<float>& pool) -> std::uint8_t {
+            if (lab[1 - h][i] & outlier_bit) return 0;  // a pair, decided above
+            const int x = static_cast<int>(i % static_cast<std::uint32_t>(w));
+            const int y = static_cast<int>(i / static_cast<std::uint32_t>(w));
+            if (cls(lab[1 - h][i]) == nonfinite_class) {
+                const double l = mean_colour(hb[h]->color, x, y), v = reduced_variance(hb[h]->variance, x, y);
+                return judges_confidence && is_highlight(options_.highlight, l, l, v, v, cal) ? highlight_bit : 0;
             }
+            const double l_other = mean_colour(hb[1 - h]->color, x, y);
+            const double v_other =
+                noise_floor(x, y, w, a.color.height(), reduced_variance(hb[1 - h]->variance, x, y), l_other, cal, pool);
+            return exceeds_other_half(options_.highlight, mean_colour(hb[h]->color, x, y), l_other, v_other, cal)
+                       ? 0
+                       : consistent_bit;
+        };
+        for (int h = 0; h < 2; ++h) {
+            const std::size_t n = rep.half[h].outliers - rep.half[h].local;  // local flags exceed
+            std::vector<std::uint8_t>& bits = halves_[h].decision;         // the other half already
+            bits.assign(n, 0);
+            for_chunks(n, [&](std::size_t j0, std::size_t j1) {
+                std::vector<float> pool;
+                for (std::size_t j = j0; j < j1; ++j) bits[j] = decide(h, halves_[h].order[j], pool);
+            });
+        }
+        for (int h = 0; h < 2; ++h)
+            for (std::size_t j = 0; j < halves_[h].decision.size(); ++j) lab[h][halves_[h].order[j]] |= halves_[h].decision[j];
+    }
+
+    // A list of n entries in fixed chunks on the executor: f(first, last) per chunk. The
+    // chunks do not depend on the thread count, so neither does any result.
+    template <class F>
+    void for_chunks(std::size_t n, F&& f) const {
+        constexpr std::size_t chunk = 4096;
+        exec_.run((n + chunk - 1) / chunk, [&](std::size_t c) { f(c * chunk, std::min(n, (c + 1) * chunk)); });
     }
 
     // The other half's variance at (x, y), but never below what its neighbourhood's typical
@@ -569,11 +617,12 @@ private:
     // too low, and a noisy pixel would then "exceed" its other half. The median, not the
     // mean-corrected estimate: fireflies around the pixel inflate the spread that corrects it.
     // Renderer units, like v.
-    double noise_floor(int x, int y, int w, int h, double v, double level, double calibration) {
+    double noise_floor(int x, int y, int w, int h, double v, double level, double calibration,
+                       std::vector<float>& pool) const {
         const local_test_scratch& ls = local_scratch_;
         if (!options_.local_test || ls.rel_var[0].empty() || !(calibration > 0)) return v;
         const detail::pooled_estimate e = detail::pooled_relative_variance(
-            ls.rel_var, w, h, x, y, options_.local.radius, options_.local.min_neighbours, pool_);
+            ls.rel_var, w, h, x, y, options_.local.radius, options_.local.min_neighbours, pool);
         if (!(e.nu == e.nu)) return v;  // too few neighbours: the pixel's own variance
         return std::max(v, e.typical * level * level / calibration);
     }
@@ -647,17 +696,31 @@ private:
             return clean(ls[q]) && clean(lo[q]);
         };
         auto readable_other = [&](int xx, int yy) { return clean(lo[index(xx, yy, w)]); };
-        double out[8];
-        for (const std::uint32_t p : s.fix) {
-            const int x = static_cast<int>(p % static_cast<std::uint32_t>(w));
-            const int y = static_cast<int>(p / static_cast<std::uint32_t>(w));
-            if (cls(lo[p]) == nonfinite_class || (lo[p] & fix_bit)) continue;
-            if (!other.alpha.empty() && !(other.alpha.load(x, y) > 0)) continue;
-            (void)detail::cross_half_estimate(hv[0], hv[1], s.recon.kernel_, rep.variance_calibration,
-                                              options_.blend_spatial, x, y, readable, readable_other, out);
-            s.cross.push_back(p);
-            s.cross_values.insert(s.cross_values.end(), out, out + nch);
+        // Every entry's estimate in chunks across the executor, then the taken ones compacted
+        // in list order.
+        const std::size_t n = s.fix.size(), stride = static_cast<std::size_t>(nch);
+        s.cross_values.resize(n * stride);
+        s.decision.assign(n, 0);
+        for_chunks(n, [&](std::size_t e0, std::size_t e1) {
+            for (std::size_t e = e0; e < e1; ++e) {
+                const std::uint32_t p = s.fix[e];
+                const int x = static_cast<int>(p % static_cast<std::uint32_t>(w));
+                const int y = static_cast<int>(p / static_cast<std::uint32_t>(w));
+                if (cls(lo[p]) == nonfinite_class || (lo[p] & fix_bit)) continue;
+                if (!other.alpha.empty() && !(other.alpha.load(x, y) > 0)) continue;
+                (void)detail::cross_half_estimate(hv[0], hv[1], s.recon.kernel_, rep.variance_calibration,
+                                                  options_.blend_spatial, x, y, readable, readable_other,
+                                                  &s.cross_values[e * stride]);
+                s.decision[e] = 1;
+            }
+        });
+        for (std::size_t e = 0; e < n; ++e) {
+            if (!s.decision[e]) continue;
+            if (s.cross.size() != e)
+                std::copy_n(&s.cross_values[e * stride], stride, &s.cross_values[s.cross.size() * stride]);
+            s.cross.push_back(s.fix[e]);
         }
+        s.cross_values.resize(s.cross.size() * stride);
     }
 
     template <class C, class V, class A>

@@ -109,11 +109,24 @@ struct strided {
           y(v.row_stride() / static_cast<std::ptrdiff_t>(sizeof(T))) {}
 };
 
-// Arithmetic of the standard deviation: float for float images (vectorizes, and float
-// precision is what the images carry), double otherwise. Every layout uses the same formula
-// in the same order, so an RGB view and an RGBA view of the same pixels give the same bits.
+// Whether channel_traits<T> converts runs of values to float in bulk:
+//   static void to_float(const T* in, float* out, std::size_t n) noexcept;
+// (the documented hook for a renderer's half type: the stddev pass then converts each row
+// and runs the packed float kernel, instead of loading value by value).
+template <class T, class = void>
+struct has_row_conversion : std::false_type {};
 template <class T>
-using sd_arith = std::conditional_t<std::is_same_v<std::remove_cv_t<T>, float>, float, double>;
+struct has_row_conversion<T, std::void_t<decltype(channel_traits<T>::to_float(
+                                 std::declval<const T*>(), std::declval<float*>(), std::size_t{}))>>
+    : std::true_type {};
+
+// Arithmetic of the standard deviation: float for float images and for types that convert to
+// float in bulk (vectorizes, and float precision is what the images carry), double otherwise.
+// Every layout uses the same formula in the same order, so an RGB view and an RGBA view of
+// the same pixels, or a packed and a padded view of half values, give the same bits.
+template <class T>
+using sd_arith = std::conditional_t<std::is_same_v<std::remove_cv_t<T>, float> || has_row_conversion<std::remove_cv_t<T>>::value,
+                                    float, double>;
 
 // One pixel, branch-free: its class, and its reduced variance (-1 ignored, NaN non-finite).
 // c, v: the first three colour / variance channels (unused ones 0); NC colour channels, NV
@@ -368,37 +381,45 @@ std::size_t stddev_packed(const float* col, const float* var, const float* alpha
                                   : stddev_packed<vr::mean, CS, VS, false>(col, var, alpha, n, sd);
 }
 
-// Whether channel_traits<T> converts runs of values to float in bulk:
-//   static void to_float(const T* in, float* out, std::size_t n) noexcept;
-// (the documented hook for a renderer's half type: the stddev pass then converts each row
-// and runs the packed float kernel, instead of loading value by value).
-template <class T, class = void>
-struct has_row_conversion : std::false_type {};
-template <class T>
-struct has_row_conversion<T, std::void_t<decltype(channel_traits<T>::to_float(
-                                 std::declval<const T*>(), std::declval<float*>(), std::size_t{}))>>
-    : std::true_type {};
 
-// Packed float colour, packed variance of a converting type: row by row through a float row.
-template <class V>
-std::size_t stddev_converted_rows(const image_view<const float>& color, const image_view<V>& variance,
+// Row y of a packed view as floats: the view's own memory for float, else converted into
+// scratch through the traits' bulk hook.
+template <class T>
+const float* float_row(const image_view<T>& v, int y, std::vector<float>& scratch) {
+    const std::size_t n = static_cast<std::size_t>(v.width()) * static_cast<std::size_t>(v.channels());
+    const T* p = v.data() + static_cast<std::size_t>(y) * n;
+    if constexpr (std::is_same_v<std::remove_cv_t<T>, float>) {
+        (void)scratch;
+        return p;
+    } else {
+        scratch.resize(n);
+        channel_traits<std::remove_cv_t<T>>::to_float(p, scratch.data(), n);
+        return scratch.data();
+    }
+}
+
+// Whether T's packed rows read as floats: float itself, or a type with the bulk hook.
+template <class T>
+inline constexpr bool float_rows_v = std::is_same_v<std::remove_cv_t<T>, float> || has_row_conversion<std::remove_cv_t<T>>::value;
+
+// Packed colour and variance of which at least one converts: row by row through float rows.
+template <class C, class V>
+std::size_t stddev_converted_rows(const image_view<C>& color, const image_view<V>& variance,
                                   const float* alpha, variance_reduction how, float* sd) {
     const int w = color.width(), cc = color.channels(), vc = variance.channels();
-    const std::size_t row = static_cast<std::size_t>(w) * static_cast<std::size_t>(vc);
-    std::vector<float> converted(row);
+    std::vector<float> crow_scratch, vrow_scratch;
     std::size_t negative_n = 0;
     for (int y = 0; y < color.height(); ++y) {
         const std::size_t first = static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
-        channel_traits<std::remove_cv_t<V>>::to_float(variance.data() + first * static_cast<std::size_t>(vc),
-                                                      converted.data(), row);
-        const float* col = color.data() + first * static_cast<std::size_t>(cc);
+        const float* col = float_row(color, y, crow_scratch);
+        const float* var = float_row(variance, y, vrow_scratch);
         const float* ap = alpha ? alpha + first : nullptr;
         float* out = sd + first;
         const std::size_t n = static_cast<std::size_t>(w);
-        if (cc == 3) negative_n += vc == 1 ? stddev_packed<3, 1>(col, converted.data(), ap, n, how, out)
-                                           : stddev_packed<3, 3>(col, converted.data(), ap, n, how, out);
-        else negative_n += vc == 1 ? stddev_packed<4, 1>(col, converted.data(), ap, n, how, out)
-                                   : stddev_packed<4, 4>(col, converted.data(), ap, n, how, out);
+        if (cc == 3) negative_n += vc == 1 ? stddev_packed<3, 1>(col, var, ap, n, how, out)
+                                           : stddev_packed<3, 3>(col, var, ap, n, how, out);
+        else negative_n += vc == 1 ? stddev_packed<4, 1>(col, var, ap, n, how, out)
+                                   : stddev_packed<4, 4>(col, var, ap, n, how, out);
     }
     return negative_n;
 }
@@ -444,10 +465,11 @@ stddev_counts stddev_pass(const image_view<C>& color, const image_view<V>& varia
         else if (packed && cc == 4 && vc == 1) negative_n = stddev_packed<4, 1>(color.data(), variance.data(), ap, n, how, sd);
         else done = false;
     }
-    if constexpr (std::is_same_v<std::remove_cv_t<C>, float> && has_row_conversion<std::remove_cv_t<V>>::value) {
-        // Packed float colour with a variance type that converts whole rows to float (a
-        // renderer's half): each row of variance is converted into a scratch row and the
-        // packed float kernel runs on it. Alpha: packed float, or none.
+    if constexpr (float_rows_v<C> && float_rows_v<V> &&
+                  !(std::is_same_v<std::remove_cv_t<C>, float> && std::is_same_v<std::remove_cv_t<V>, float>)) {
+        // Colour or variance of a type that converts whole rows to float (a renderer's
+        // half): each row is converted into a scratch row and the packed float kernel runs
+        // on it. Alpha: packed float, or none.
         constexpr bool float_alpha = std::is_same_v<std::remove_cv_t<A>, float>;
         if (color.is_packed() && variance.is_packed() && (!has_alpha || (float_alpha && alpha.is_packed())) &&
             (cc == 3 || cc == 4) && (vc == 1 || vc == cc)) {
