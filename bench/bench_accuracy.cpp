@@ -61,7 +61,7 @@ struct scene_data {
 };
 
 using halves_fn = std::function<bool(half_buffer<float>&, half_buffer<float>&)>;  // false: error
-using buffers_fn = std::function<void(const firefly_peers::buffer_list&, std::size_t, float*)>;
+using buffers_fn = std::function<void(const firefly_peers::buffer_list&, int w, int h, float*)>;
 
 // A method on the two halves is made afresh for each benchmark (a detector keeps frame-sized
 // work buffers: hundreds of them kept alive would hold gigabytes at 2K).
@@ -144,24 +144,48 @@ void add_peer_configs(std::vector<config>& c) {
                  }), {}, false});
 }
 
+// firefly's K-buffer detector (buffers.hpp) at defaults on copies of the K buffers (no
+// variance: the spread of the buffers estimates the noise), then the mean of the cleaned ones.
+buffers_fn firefly_buffers() {
+    return [](const firefly_peers::buffer_list& b, int w, int h, float* out) {
+        const std::size_t n = static_cast<std::size_t>(w) * h * 3;
+        std::vector<std::vector<float>> copy(b.size());
+        std::vector<buffer_view<float>> views;
+        for (std::size_t i = 0; i < b.size(); ++i) {
+            copy[i].assign(b[i], b[i] + n);
+            views.push_back({*make_image_view(copy[i].data(), w, h, 3), {}});
+        }
+        cross_buffer_detector d;
+        (void)d.process(views);
+        for (std::size_t j = 0; j < n; ++j) {
+            double sum = 0;
+            for (const auto& c : copy) sum += c[j];
+            out[j] = static_cast<float>(sum / static_cast<double>(copy.size()));
+        }
+    };
+}
+
 // The K-buffer estimators on K buffers (on the halves, K = 2, all reduce to the mean).
 void add_buffer_configs(std::vector<config>& c, int k) {
     const std::string K = std::to_string(k);
     const bool ds = k > 2;  // at K = 2 their output is the input's: no NL-means column needed
-    c.push_back({"mean_k" + K, {}, &firefly_peers::mean_of_buffers, false});
+    if (k >= 4) c.push_back({"firefly_k" + K, {}, firefly_buffers(), false});  // no variance here
+    c.push_back({"mean_k" + K, {}, [](const firefly_peers::buffer_list& b, int w, int h, float* out) {
+                     firefly_peers::mean_of_buffers(b, static_cast<std::size_t>(w) * h, out);
+                 }, false});
     std::vector<int> groups = {k};
     if (k % 2 == 0 && k / 2 >= 3) groups.push_back(k / 2);
     for (int m : groups) {
         const std::string M = std::to_string(m);
-        c.push_back({"mon_k" + K + "_m" + M, {}, [m](const firefly_peers::buffer_list& b, std::size_t n, float* out) {
-                         firefly_peers::median_of_means(b, n, m, out);
+        c.push_back({"mon_k" + K + "_m" + M, {}, [m](const firefly_peers::buffer_list& b, int w, int h, float* out) {
+                         firefly_peers::median_of_means(b, static_cast<std::size_t>(w) * h, m, out);
                      }, ds});
         for (double t : {0.1, 0.25, 0.4}) {
             if (m == 2 && t != 0.25) continue;  // two means: every threshold gives the mean
             char name[64];
             std::snprintf(name, sizeof name, "gmon_k%d_m%d_t%.2f", k, m, t);
-            c.push_back({name, {}, [m, t](const firefly_peers::buffer_list& b, std::size_t n, float* out) {
-                             firefly_peers::gmon(b, n, m, t, out);
+            c.push_back({name, {}, [m, t](const firefly_peers::buffer_list& b, int w, int h, float* out) {
+                             firefly_peers::gmon(b, static_cast<std::size_t>(w) * h, m, t, out);
                          }, ds && t == 0.25});
         }
     }
@@ -349,7 +373,7 @@ void run_halves(benchmark::State& st, const scene_data* s, const config& cfg) {
 void run_buffers(benchmark::State& st, const scene_data* s, const config& cfg) {
     const firefly_peers::buffer_list bl = s->buffer_list();
     std::vector<float> out(s->pixels() * 3);
-    for (auto _ : st) cfg.buffers(bl, s->pixels(), out.data());
+    for (auto _ : st) cfg.buffers(bl, s->w, s->h, out.data());
     count_metrics(st, *s, out);
     // Halves for the ground-truth counters: a pixel the estimator left at the input's value
     // is unchanged in both halves; any other takes the output in both.
