@@ -18,8 +18,14 @@
 
 namespace firefly_cli {
 
+// Where the buffers of a frame come from: two half buffers (positional HALF_A HALF_B),
+// --buffers (K files with variance) or --renders (N colour-only renders with different seeds).
+enum class input_mode { halves, buffers, renders };
+
 struct options {
-    std::string in_a, in_b, out, halves, masks, report, preview;
+    input_mode mode = input_mode::halves;
+    std::vector<std::string> inputs;  // one path (or '#' pattern) per buffer
+    std::string out, halves, masks, report, preview;
     float exposure = 1.0f;
     std::string var_a, var_b;  // PFM variance files
     std::vector<std::string> colour = {"R", "G", "B"};
@@ -28,9 +34,22 @@ struct options {
     bool use_alpha = true, quiet = false;
     bool sequence = false;
     long long first = 0, last = 0, step = 1;
-    firefly::detector_options o;
+    firefly::detector_options o;       // two buffers: firefly::detector
+    firefly::cross_buffer_options x;   // 3 or more: firefly::cross_buffer_detector (x.pair unused)
     unsigned threads = 1;
+    int buffers() const { return static_cast<int>(inputs.size()); }
 };
+
+// firefly::cross_buffer_detector's limits: without variance the noise comes from the spread of
+// the buffers, and it refuses fewer than 4 buffers without variance ("2 or 3 buffers need
+// variance"); it takes at most 64.
+inline constexpr int min_renders = 4;
+inline constexpr int max_buffers = 64;
+
+// Option groups: the two-half detector's options mean nothing to the K-buffer one and the
+// other way round; giving one to the wrong detector is refused rather than ignored.
+inline const char* const pair_group = "two-half detector (HALF_A HALF_B, or --buffers with 2 files)";
+inline const char* const cross_group = "K-buffer detector (--renders, or --buffers with 3 or more files)";
 
 // Frame numbers and counts the tool accepts: far from any overflow of `long long`.
 inline constexpr long long max_frame = 999999999;
@@ -113,16 +132,23 @@ inline CLI::Validator whole_in(long long lo, long long hi, const std::string& wh
 }
 
 const char* const description =
-    "Removes fireflies from a Monte Carlo render given as two half buffers (each holding half\n"
-    "of every pixel's samples) with per-pixel variance, and writes the combined image.\n"
-    "  firefly half_a.exr half_b.exr -o clean.exr\n"
-    "  firefly beauty_a.####.exr beauty_b.####.exr --frames 1-240 -o clean.####.exr\n";
+    "Removes fireflies from a Monte Carlo render and writes the cleaned image. The input is one of:\n"
+    "  two half buffers (each holding half of every pixel's samples) with per-pixel variance:\n"
+    "    firefly half_a.exr half_b.exr -o clean.exr\n"
+    "  K >= 2 buffers with variance (K = 2 is the same as two halves):\n"
+    "    firefly --buffers b_0.exr b_1.exr b_2.exr b_3.exr -o clean.exr\n"
+    "  N >= 4 colour-only renders of one frame with different seeds (EXR or PFM):\n"
+    "    firefly --renders r_0.exr r_1.exr r_2.exr r_3.exr r_4.exr r_5.exr r_6.exr r_7.exr -o clean.exr\n"
+    "  a sequence: '#' runs in every path, e.g.\n"
+    "    firefly beauty_a.####.exr beauty_b.####.exr --frames 1-240 -o clean.####.exr\n"
+    "The output is the mean of the cleaned buffers and the variance of that mean: the sum of the\n"
+    "buffers' variances / K^2, or for renders their sample variance / N.\n";
 
 const char* const footer =
     "Outputs: every file of a frame is first written to an exclusive temporary in its folder and\n"
     "renamed only when all of them are complete; a failure leaves none of them. An output that is\n"
-    "an input (same file under any name) is refused. A sequence goes on past a bad frame, reports\n"
-    "it (stderr and --report) and exits 1 at the end.\n";
+    "an input, and two inputs that are one file (under any names), are refused. A sequence goes on\n"
+    "past a bad frame, reports it (stderr and --report) and exits 1 at the end.\n";
 
 // An option taking one of a few words (name -> value).
 template <class E>
@@ -145,35 +171,53 @@ void add_choice(CLI::App& app, const char* name, E& target, const std::map<std::
         ->group(group);
 }
 
-void add_detector_options(CLI::App& app, options& c);
+// What the command line names before it is checked: inputs as given, and the texts parsed later.
+struct raw_args {
+    std::vector<std::string> positional, buffers, renders;
+    std::string frames, channels, variance;
+};
 
-inline void add_io_options(CLI::App& app, options& c, std::vector<std::string>& positional, std::string& frames,
-                           std::string& channels, std::string& variance) {
-    app.add_option("inputs", positional,
+inline void add_io_options(CLI::App& app, options& c, raw_args& r) {
+    app.add_option("inputs", r.positional,
                    "OpenEXR files, one per half: colour and variance channels (PFM colour files work too, with "
                    "--variance-a/--variance-b)")
         ->type_name("HALF_A HALF_B")
         ->group("inputs");
-    app.add_option("--channels", channels, "colour channel names (three)")->type_name("NAMES")->default_str("R,G,B")->group("inputs");
-    app.add_option("--variance", variance, "variance channel names (1 or 3)")->type_name("NAMES")
+    app.add_option("--buffers", r.buffers,
+                   "K = 2 to 64 OpenEXR files of one frame, each with colour and the variance of its mean "
+                   "(--channels, --variance); every file after it is a buffer")
+        ->type_name("FILE...")
+        ->group("inputs");
+    app.add_option("--renders", r.renders,
+                   "N = 4 to 64 colour-only renders of one frame with different seeds (OpenEXR or PFM); every "
+                   "file after it is a render; the output's variance channels are named by --variance")
+        ->type_name("FILE...")
+        ->group("inputs");
+    app.add_option("--channels", r.channels, "colour channel names (three)")->type_name("NAMES")->default_str("R,G,B")->group("inputs");
+    app.add_option("--variance", r.variance, "variance channel names (1 or 3; --renders: 3, written to the output)")->type_name("NAMES")
         ->default_str("Variance.R,Variance.G,Variance.B")
         ->group("inputs");
     app.add_option("--alpha-channel", c.alpha, "alpha channel; used when present")->type_name("NAME")->group("inputs");
     app.add_flag_callback("--no-alpha", [&c] { c.use_alpha = false; }, "ignore alpha even when present")->group("inputs");
     app.add_option("--variance-a", c.var_a, "variance PFM file of half A (PFM colour inputs)")->type_name("FILE")->group("inputs");
     app.add_option("--variance-b", c.var_b, "variance PFM file of half B (PFM colour inputs)")->type_name("FILE")->group("inputs");
-    app.add_option("--frames", frames,
+    app.add_option("--frames", r.frames,
                    "FIRST-LAST[:STEP] frame sequence: '#' runs in every path become the frame number, zero-padded "
                    "to the run's length")->type_name("FIRST-LAST[:STEP]")
         ->group("inputs");
-    app.add_option("-o,--output", c.out, "combined cleaned image (EXR: colour, Variance.*, alpha)")->type_name("FILE")->group("outputs");
-    app.add_option("--halves", c.halves, "also write PREFIX_a.exr and PREFIX_b.exr (cleaned halves)")->type_name("PREFIX")->group("outputs");
+    app.add_option("-o,--output", c.out, "the mean of the cleaned buffers (EXR: colour, Variance.* of the mean, alpha)")->type_name("FILE")->group("outputs");
+    app.add_option("--halves", c.halves,
+                   "also write the cleaned buffers: PREFIX_a.exr and PREFIX_b.exr (two halves), PREFIX_0.exr ... "
+                   "(--buffers, --renders)")->type_name("PREFIX")->group("outputs");
     app.add_option("--masks", c.masks,
-                   "also write PREFIX_a.exr and PREFIX_b.exr with channels firefly, highlight, consistent, nonfinite "
-                   "(0 or 1)")->type_name("PREFIX")
+                   "also write masks, named as --halves: channels firefly, highlight, consistent, nonfinite (0 or 1) "
+                   "for two buffers; firefly, nonfinite for 3 or more")->type_name("PREFIX")
         ->group("outputs");
-    app.add_option("--report", c.report, "JSON report: options, per-frame counts, timings and errors")->type_name("FILE")->group("outputs");
-    app.add_option("--preview", c.preview, "PNG previews PREFIX_before.png, PREFIX_after.png (sRGB)")->type_name("PREFIX")->group("outputs");
+    app.add_option("--report", c.report,
+                   "JSON report: options, per-frame counts (buffers, pixels, tested, fireflies, nonfinite, left, "
+                   "per_buffer; two halves also per half), timings and errors")->type_name("FILE")->group("outputs");
+    app.add_option("--preview", c.preview,
+                   "PNG previews PREFIX_before.png (mean of the inputs), PREFIX_after.png (the output), sRGB")->type_name("PREFIX")->group("outputs");
     app.add_option("--exposure", c.exposure, "preview exposure multiplier")->type_name("X")
         ->check(number_in(0, 1e30, true, false, "a positive number"))
         ->group("outputs");
@@ -181,7 +225,7 @@ inline void add_io_options(CLI::App& app, options& c, std::vector<std::string>& 
 }
 
 inline void add_detector_options(CLI::App& app, options& c) {
-    const char* g = "detector options";
+    const char* g = pair_group;
     auto& o = c.o;
     app.add_option("--significance", o.alpha, "generalized ESD alpha")->type_name("X")->check(number_in(0, 1, true, true, "a number in (0, 1)"))->group(g);
     app.add_option("--bound", o.bound_threshold, "modified Z-score threshold")->type_name("X")->check(number_in(0, 1e30, false, false, "a number >= 0"))->group(g);
@@ -218,7 +262,23 @@ inline void add_detector_options(CLI::App& app, options& c) {
     app.add_option("--iterations", o.reconstruction.max_iterations, "phase 2 iteration cap")->type_name("N")
         ->check(whole_in(0, 1000000, "a whole number from 0 to 1000000"))->group(g);
     app.add_option("--threads", c.threads, "threads; results are identical for any count")->type_name("N")
-        ->check(whole_in(1, 256, "a whole number from 1 to 256"))->group(g);
+        ->check(whole_in(1, 256, "a whole number from 1 to 256"))->group("detector (every mode)");
+}
+
+inline void add_cross_options(CLI::App& app, options& c) {
+    app.add_option("--false-alarm", c.x.false_alarm,
+                   "expected share of pixel-buffers flagged in a frame without fireflies")
+        ->type_name("X")
+        ->check(number_in(0, 0.5, true, true, "a number in (0, 0.5)"))
+        ->group(cross_group);
+    app.add_option("--radius", c.x.radius, "the noise is pooled over (2 N + 1)^2 pixels")
+        ->type_name("N")
+        ->check(whole_in(0, 8, "a whole number from 0 to 8"))
+        ->group(cross_group);
+    app.add_flag("--use-variance", c.x.use_variance,
+                 "--buffers with 4 or more files: the noise from the files' variances instead of the spread of "
+                 "the buffers (3 files always use them)")
+        ->group(cross_group);
 }
 
 // Channel names must be distinct: a colour, variance or alpha channel read twice would be
@@ -236,27 +296,91 @@ inline std::string check_channel_names(const options& c) {
     return {};
 }
 
+// The input mode and its files: positional halves, --buffers or --renders, never mixed.
+inline std::string choose_inputs(options& c, const raw_args& r) {
+    const bool buffers = !r.buffers.empty(), renders = !r.renders.empty();
+    if (buffers && renders) return "--buffers and --renders cannot be combined";
+    if (!buffers && !renders) {
+        if (r.positional.size() != 2) return "expected two inputs, HALF_A and HALF_B (firefly --help)";
+        c.mode = input_mode::halves;
+        c.inputs = r.positional;
+        return {};
+    }
+    const std::string flag = buffers ? "--buffers" : "--renders";
+    if (!r.positional.empty())
+        return flag + " cannot be mixed with positional inputs (" + r.positional[0] +
+               "): give every file after " + flag;
+    c.mode = buffers ? input_mode::buffers : input_mode::renders;
+    c.inputs = buffers ? r.buffers : r.renders;
+    const int k = c.buffers();
+    if (renders && k < min_renders)
+        return "--renders needs at least " + std::to_string(min_renders) + " renders, got " + std::to_string(k) +
+               " (the detector takes fewer than 4 buffers only with variance channels: use --buffers)";
+    if (buffers && k < 2) return "--buffers needs at least 2 files, got " + std::to_string(k);
+    if (k > max_buffers) return flag + " takes at most " + std::to_string(max_buffers) + " files, got " + std::to_string(k);
+    return {};
+}
+
+// Options that belong to one mode only.
+inline std::string check_mode_options(const options& c) {
+    const bool halves = c.mode == input_mode::halves, renders = c.mode == input_mode::renders;
+    const bool pfm_variance = !c.var_a.empty() || !c.var_b.empty();
+    if (!halves && pfm_variance) return "--variance-a and --variance-b go with PFM half buffers (HALF_A HALF_B) only";
+    bool pfm = false;
+    for (const auto& p : c.inputs) pfm = pfm || ends_with_ci(p, ".pfm");
+    if (halves && pfm && (c.var_a.empty() || c.var_b.empty()))
+        return "PFM inputs hold colour only: give --variance-a and --variance-b PFM files";
+    if (c.mode == input_mode::buffers && pfm)
+        return "--buffers reads OpenEXR files with colour and variance channels (a PFM holds colour only: "
+               "--renders takes colour-only files)";
+    if (renders && c.variance.size() != 3)
+        return "--renders writes one variance channel per colour channel: --variance wants three names";
+    if (c.x.use_variance && !(c.mode == input_mode::buffers && c.buffers() >= 4))
+        return "--use-variance needs --buffers with at least 4 files (renders carry no variance, 3 buffers "
+               "always use it, 2 go to the two-half detector)";
+    return {};
+}
+
+// A sequence reads and writes one set of files per frame: every input path needs '#'.
+inline std::string check_sequence_paths(const options& c) {
+    if (!c.sequence) return {};
+    if (c.out.find('#') == std::string::npos) return "--frames needs '#' in the output name too, e.g. clean.####.exr";
+    std::vector<std::string> paths = c.inputs;
+    for (const auto* v : {&c.var_a, &c.var_b})
+        if (!v->empty()) paths.push_back(*v);
+    for (const auto& p : paths)
+        if (p.find('#') == std::string::npos)
+            return "--frames needs '#' in every input path: " + p + " has none (it would be read for every frame)";
+    return {};
+}
+
 // Checks across options, after parsing.
-inline std::string check_parsed(options& c, const std::vector<std::string>& positional, const std::string& channels,
-                                const std::string& variance) {
-    if (!channels.empty() && (c.colour = split(channels)).size() != 3) return "--channels wants three names, e.g. R,G,B";
-    if (!variance.empty()) {
-        c.variance = split(variance);
+inline std::string check_parsed(options& c, const raw_args& r) {
+    if (!r.channels.empty() && (c.colour = split(r.channels)).size() != 3) return "--channels wants three names, e.g. R,G,B";
+    if (!r.variance.empty()) {
+        c.variance = split(r.variance);
         if (c.variance.size() != 1 && c.variance.size() != 3) return "--variance wants one or three names";
     }
     if (std::string e = check_channel_names(c); !e.empty()) return e;
-    if (positional.size() != 2) return "expected two inputs, HALF_A and HALF_B (firefly --help)";
+    if (std::string e = choose_inputs(c, r); !e.empty()) return e;
     if (c.out.empty()) return "no output: give -o FILE";
-    c.in_a = positional[0];
-    c.in_b = positional[1];
     if (!c.preview.empty() && !firefly_tools::have_png())
         return "--preview needs PNG support: rebuild with libpng-dev installed";
     if (const firefly::status st = firefly::check_options(c.o); !st.ok()) return std::string("bad option: ") + st.message();
-    const bool pfm = ends_with_ci(c.in_a, ".pfm") || ends_with_ci(c.in_b, ".pfm");
-    if (pfm && (c.var_a.empty() || c.var_b.empty()))
-        return "PFM inputs hold colour only: give --variance-a and --variance-b PFM files";
-    if (c.sequence && c.out.find('#') == std::string::npos)
-        return "--frames needs '#' in the output name too, e.g. clean.####.exr";
+    if (const firefly::status st = firefly::check_cross_buffer_options(c.x); !st.ok())
+        return std::string("bad option: ") + st.message();
+    if (std::string e = check_mode_options(c); !e.empty()) return e;
+    return check_sequence_paths(c);
+}
+
+// An option given on the command line for the detector that will not run.
+inline std::string check_option_groups(const CLI::App& app, const options& c) {
+    const bool pair = c.buffers() == 2;
+    const std::string unused = pair ? cross_group : pair_group;
+    for (const CLI::Option* o : app.get_options())
+        if (o->count() > 0 && o->get_group() == unused)
+            return o->get_name() + " is an option of the " + (pair ? "K-buffer" : "two-half") + " detector, which " +
+                   (pair ? "2 buffers do not use" : "--renders and --buffers with 3 or more files do not use");
     return {};
 }
 
@@ -267,11 +391,11 @@ inline std::string parse(int argc, char** argv, options& c, bool& done) {
     app.footer(footer);
     app.option_defaults()->always_capture_default();
     app.get_formatter()->column_width(34);
-    std::vector<std::string> positional;
-    std::string frames, channels, variance;
+    raw_args r;
     bool version = false;
-    add_io_options(app, c, positional, frames, channels, variance);
+    add_io_options(app, c, r);
     add_detector_options(app, c);
+    add_cross_options(app, c);
     app.add_flag("--version", version, "print the version");
     try {
         app.parse(argc, argv);
@@ -289,9 +413,10 @@ inline std::string parse(int argc, char** argv, options& c, bool& done) {
         done = true;
         return {};
     }
-    if (!frames.empty())
-        if (std::string e = parse_frames(frames, c); !e.empty()) return e;
-    return check_parsed(c, positional, channels, variance);
+    if (!r.frames.empty())
+        if (std::string e = parse_frames(r.frames, c); !e.empty()) return e;
+    if (std::string e = check_parsed(c, r); !e.empty()) return e;
+    return check_option_groups(app, c);
 }
 
 }  // namespace firefly_cli

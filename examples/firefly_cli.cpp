@@ -1,17 +1,21 @@
 // firefly: the command-line cleaner for real renderer output.
 //
 //   firefly half_a.exr half_b.exr -o clean.exr
+//   firefly --buffers b_0.exr b_1.exr b_2.exr b_3.exr -o clean.exr
+//   firefly --renders r_0.exr ... r_7.exr -o clean.exr
 //   firefly beauty_a.####.exr beauty_b.####.exr --frames 1-240 -o clean.####.exr
 //
-// Reads the two half buffers of a frame (colour R,G,B and variance Variance.R/G/B, the names
-// pbrt-v4 and Blender write; optional alpha A), cleans them with firefly::detector and writes
-// the combined image (A + B) / 2 with the variance of that mean.
+// Reads the buffers of a frame: two half buffers or K buffers (colour R,G,B and the variance
+// of each buffer's mean, Variance.R/G/B, the names pbrt-v4 and Blender write), or N colour-only
+// renders with different seeds; optional alpha A. Two buffers are cleaned by firefly::detector,
+// more by firefly::cross_buffer_detector (the same object: the first is inside the second). It
+// writes the mean of the cleaned buffers with the variance of that mean.
 //
 // Outputs: all files of a frame (-o, --halves, --masks, --preview; and --report for a single
 // frame) are written to exclusive temporaries and renamed only when all are complete, so a
-// failure leaves none of them. An output that is an input, by file identity, is refused
-// before anything is written. A sequence goes on past a bad frame, records it in the report
-// and exits 1 at the end.
+// failure leaves none of them. An output that is an input, by file identity, and two inputs
+// that are one file are refused before anything is written. A sequence goes on past a bad
+// frame, records it in the report and exits 1 at the end.
 #include <firefly/firefly.hpp>
 
 #include <chrono>
@@ -52,76 +56,120 @@ std::string frame_path(const std::string& pattern, long long frame) {
     return out;
 }
 
+using firefly_cli::input_mode;
+
+// How files and messages name buffer i: _a/_b and HALF_A/HALF_B for two halves (as always),
+// _0 ... _{K-1} for --buffers and --renders.
+std::string buffer_suffix(const options& c, int i) {
+    if (c.mode == input_mode::halves) return i ? "_b" : "_a";
+    return "_" + std::to_string(i);
+}
+std::string input_label(const options& c, int i) {
+    if (c.mode == input_mode::halves) return i ? "HALF_B" : "HALF_A";
+    return (c.mode == input_mode::renders ? "render " : "buffer ") + std::to_string(i);
+}
+const char* inputs_noun(const options& c) {
+    return c.mode == input_mode::halves ? "halves" : c.mode == input_mode::buffers ? "buffers" : "renders";
+}
+
 // Every file name of one frame.
 struct frame_files {
-    std::string a, b, va, vb;                           // inputs (va, vb: PFM variance)
-    std::string out, halves[2], masks[2], preview[2];   // outputs; empty when not asked for
+    std::vector<std::string> in, var;        // one per buffer (var: PFM variance of a half, or empty)
+    std::string out, preview[2];             // outputs; empty when not asked for
+    std::vector<std::string> halves, masks;  // one per buffer when asked for
 };
 
 frame_files files_of(const options& c, long long frame) {
     auto p = [&](const std::string& s) { return c.sequence ? frame_path(s, frame) : s; };
-    frame_files f{p(c.in_a), p(c.in_b), p(c.var_a), p(c.var_b), p(c.out), {}, {}, {}};
-    for (int i = 0; i < 2; ++i) {
-        if (!c.halves.empty()) f.halves[i] = p(c.halves) + (i ? "_b.exr" : "_a.exr");
-        if (!c.masks.empty()) f.masks[i] = p(c.masks) + (i ? "_b.exr" : "_a.exr");
-        if (!c.preview.empty()) f.preview[i] = p(c.preview) + (i ? "_after.png" : "_before.png");
+    frame_files f;
+    f.out = p(c.out);
+    for (int i = 0; i < c.buffers(); ++i) {
+        f.in.push_back(p(c.inputs[static_cast<std::size_t>(i)]));
+        f.var.push_back(c.mode == input_mode::halves ? p(i ? c.var_b : c.var_a) : std::string());
+        if (!c.halves.empty()) f.halves.push_back(p(c.halves) + buffer_suffix(c, i) + ".exr");
+        if (!c.masks.empty()) f.masks.push_back(p(c.masks) + buffer_suffix(c, i) + ".exr");
+    }
+    if (!c.preview.empty()) {
+        f.preview[0] = p(c.preview) + "_before.png";
+        f.preview[1] = p(c.preview) + "_after.png";
     }
     return f;
 }
 
-// Refuses, before anything is written, an output that is an input of any frame (same
-// device and inode, whatever the spelling), an output named twice in a frame, and a file
-// given as both halves.
-std::string check_files(const options& c) {
-    using firefly_tools::file_id;
-    const long long first = c.sequence ? c.first : 0, last = c.sequence ? c.last : 0;
-    std::vector<std::pair<file_id, std::string>> inputs;
-    auto find = [](const std::vector<std::pair<file_id, std::string>>& v, const file_id& id) -> const std::string* {
-        for (const auto& e : v)
-            if (e.first == id) return &e.second;
-        return nullptr;
-    };
-    for (long long fr = first; fr <= last; fr += c.step) {
-        const frame_files f = files_of(c, fr);
-        file_id ia, ib;
-        const bool ha = firefly_tools::identify(f.a, ia) && ia.leaf.empty();
-        const bool hb = firefly_tools::identify(f.b, ib) && ib.leaf.empty();
-        if (ha && hb && ia == ib) return "HALF_A and HALF_B are the same file (" + f.a + ", " + f.b + ")";
-        for (const std::string* p : {&f.a, &f.b, &f.va, &f.vb}) {
-            file_id id;
-            if (!p->empty() && firefly_tools::identify(*p, id) && id.leaf.empty()) inputs.push_back({id, *p});
-        }
-    }
-    for (long long fr = first; fr <= last; fr += c.step) {
-        const frame_files f = files_of(c, fr);
-        std::vector<std::pair<file_id, std::string>> outs;
-        for (const std::string* p : {&f.out, &f.halves[0], &f.halves[1], &f.masks[0], &f.masks[1], &f.preview[0],
-                                     &f.preview[1], &c.report}) {
-            file_id id;
-            if (p->empty()) continue;
-            if (!firefly_tools::identify(*p, id)) continue;  // no such folder: the write will say so
-            if (const std::string* in = find(inputs, id)) return "output " + *p + " is the input " + *in + ": refused";
-            if (const std::string* o = find(outs, id)) return "outputs " + *o + " and " + *p + " are the same file";
-            outs.push_back({id, *p});
-        }
+using firefly_tools::file_id;
+using id_map = std::map<file_id, std::string>;
+
+// The identity of an existing file; false for a path that names none.
+bool existing_id(const std::string& path, file_id& id) {
+    return !path.empty() && firefly_tools::identify(path, id) && id.leaf.empty();
+}
+
+// Two inputs of one frame that are one file (same device and inode, whatever the spelling).
+std::string duplicate_input(const options& c, const frame_files& f) {
+    std::map<file_id, int> seen;
+    for (int i = 0; i < static_cast<int>(f.in.size()); ++i) {
+        file_id id;
+        if (!existing_id(f.in[static_cast<std::size_t>(i)], id)) continue;
+        const auto [it, fresh] = seen.emplace(id, i);
+        if (!fresh)
+            return input_label(c, it->second) + " and " + input_label(c, i) + " are the same file (" +
+                   f.in[static_cast<std::size_t>(it->second)] + ", " + f.in[static_cast<std::size_t>(i)] + ")";
     }
     return {};
 }
 
-struct half_data {
-    image img;  // colour (3) + variance (1 or 3) [+ alpha], interleaved
-    int nv = 3;
+// An output of the frame that is an input of any frame, or another output of the frame.
+std::string output_collision(const options& c, const frame_files& f, const id_map& inputs) {
+    std::vector<const std::string*> paths = {&f.out, &f.preview[0], &f.preview[1], &c.report};
+    for (const auto& p : f.halves) paths.push_back(&p);
+    for (const auto& p : f.masks) paths.push_back(&p);
+    id_map outs;
+    for (const std::string* p : paths) {
+        file_id id;
+        if (p->empty() || !firefly_tools::identify(*p, id)) continue;  // no such folder: the write will say so
+        if (const auto in = inputs.find(id); in != inputs.end()) return "output " + *p + " is the input " + in->second + ": refused";
+        if (const auto o = outs.find(id); o != outs.end()) return "outputs " + o->second + " and " + *p + " are the same file";
+        outs.emplace(id, *p);
+    }
+    return {};
+}
+
+// Refuses, before anything is written, two inputs of a frame that are one file, an output
+// that is an input of any frame and an output named twice in a frame.
+std::string check_files(const options& c) {
+    const long long first = c.sequence ? c.first : 0, last = c.sequence ? c.last : 0;
+    id_map inputs;
+    for (long long fr = first; fr <= last; fr += c.step) {
+        const frame_files f = files_of(c, fr);
+        if (std::string e = duplicate_input(c, f); !e.empty()) return e;
+        for (const auto* list : {&f.in, &f.var})
+            for (const std::string& p : *list) {
+                file_id id;
+                if (existing_id(p, id)) inputs.emplace(id, p);
+            }
+    }
+    for (long long fr = first; fr <= last; fr += c.step)
+        if (std::string e = output_collision(c, files_of(c, fr), inputs); !e.empty()) return e;
+    return {};
+}
+
+// One buffer of a frame as read: colour (3) [+ alpha] [+ variance (1 or 3)], interleaved.
+struct buffer_data {
+    image img;
+    int nv = 0;  // variance channels; 0 for a render
     bool has_alpha = false;
 };
 
-std::string read_pfm_half(const std::string& path, const std::string& var_path, half_data& h) {
+// A PFM colour file, with its variance PFM when var_path is given (two halves).
+std::string read_pfm_buffer(const std::string& path, const std::string& var_path, buffer_data& h) {
     firefly_tools::pfm_image col, var;
     std::string e = firefly_tools::read_pfm(path, col);
-    if (e.empty()) e = firefly_tools::read_pfm(var_path, var);
+    if (e.empty() && !var_path.empty()) e = firefly_tools::read_pfm(var_path, var);
     if (!e.empty()) return e;
     if (col.channels != 3) return path + ": the colour PFM must have 3 channels";
-    if (var.width != col.width || var.height != col.height) return var_path + ": variance and colour differ in size";
-    h.nv = var.channels;
+    if (!var_path.empty() && (var.width != col.width || var.height != col.height))
+        return var_path + ": variance and colour differ in size";
+    h.nv = var_path.empty() ? 0 : var.channels;
     h.has_alpha = false;
     h.img = image{};
     h.img.width = col.width;
@@ -138,101 +186,163 @@ std::string read_pfm_half(const std::string& path, const std::string& var_path, 
     return {};
 }
 
-std::string read_half(const options& c, const std::string& path, const std::string& var_path, half_data& h) {
-    if (firefly_cli::ends_with_ci(path, ".pfm")) return read_pfm_half(path, var_path, h);
-    std::vector<std::string> names = c.colour;
-    for (const auto& v : c.variance) names.push_back(v);
-    h.nv = static_cast<int>(c.variance.size());
+// One buffer: colour, alpha when present, and variance unless it is a render.
+std::string read_buffer(const options& c, const std::string& path, const std::string& var_path, buffer_data& h) {
+    if (firefly_cli::ends_with_ci(path, ".pfm")) return read_pfm_buffer(path, var_path, h);
+    const std::vector<std::string> none;
+    const std::vector<std::string>& variance = c.mode == input_mode::renders ? none : c.variance;
+    h.nv = static_cast<int>(variance.size());
+    auto names = [&](bool alpha) {
+        std::vector<std::string> n = c.colour;
+        if (alpha) n.push_back(c.alpha);
+        n.insert(n.end(), variance.begin(), variance.end());
+        return n;
+    };
     // Alpha when asked for and present: read with it; when the only complaint is a missing
     // channel, read again without it (a missing colour or variance channel is then reported).
     h.has_alpha = false;
     if (c.use_alpha) {
-        std::vector<std::string> with = names;
-        with.push_back(c.alpha);
-        const std::string e = firefly_tools::read_exr(path, with, h.img);
+        const std::string e = firefly_tools::read_exr(path, names(true), h.img);
         if (e.empty()) {
             h.has_alpha = true;
             return {};
         }
         if (e.find("missing channel") == std::string::npos) return e;
     }
-    return firefly_tools::read_exr(path, names, h.img);
+    return firefly_tools::read_exr(path, names(false), h.img);
 }
 
 bool same_window(const firefly_tools::window& a, const firefly_tools::window& b) {
     return a.min_x == b.min_x && a.min_y == b.min_y && a.max_x == b.max_x && a.max_y == b.max_y;
 }
 
-// The halves must match in size, windows and channels; the messages say how they differ.
-std::string check_halves(const options& c, const frame_files& f, const half_data (&h)[2]) {
-    const image &a = h[0].img, &b = h[1].img;
-    if (a.width != b.width || a.height != b.height)
-        return "the halves differ in size: " + std::to_string(a.width) + "x" + std::to_string(a.height) + " and " +
-               std::to_string(b.width) + "x" + std::to_string(b.height);
-    if (!same_window(a.data_window, b.data_window) || !same_window(a.display_window, b.display_window))
-        return "the halves differ in data or display window";
-    if (h[0].has_alpha != h[1].has_alpha) {
-        const std::string& with = h[0].has_alpha ? f.a : f.b;
-        const std::string& without = h[0].has_alpha ? f.b : f.a;
-        return "alpha channel " + c.alpha + " is in " + with + " but not in " + without + " (--no-alpha ignores it)";
+std::string size_text(const image& m) { return std::to_string(m.width) + "x" + std::to_string(m.height); }
+
+// The buffers must match the first in size, windows and channels; the messages name the files.
+std::string check_buffers(const options& c, const frame_files& f, const std::vector<buffer_data>& h) {
+    const std::string the = std::string("the ") + inputs_noun(c) + " differ in ";
+    const image& a = h[0].img;
+    for (std::size_t i = 1; i < h.size(); ++i) {
+        const image& b = h[i].img;
+        if (a.width != b.width || a.height != b.height)
+            return the + "size: " + f.in[0] + " is " + size_text(a) + ", " + f.in[i] + " is " + size_text(b);
+        if (!same_window(a.data_window, b.data_window) || !same_window(a.display_window, b.display_window))
+            return the + "data or display window: " + f.in[0] + " and " + f.in[i];
+        if (h[0].has_alpha != h[i].has_alpha) {
+            const std::string& with = h[0].has_alpha ? f.in[0] : f.in[i];
+            const std::string& without = h[0].has_alpha ? f.in[i] : f.in[0];
+            return "alpha channel " + c.alpha + " is in " + with + " but not in " + without + " (--no-alpha ignores it)";
+        }
+        if (h[0].nv != h[i].nv) return the + "variance channels: " + f.in[0] + " and " + f.in[i];
     }
-    if (h[0].nv != h[1].nv) return "the halves differ in variance channels";
     return {};
 }
 
-// Views over an interleaved half: colour, variance, alpha.
-std::string views_of(half_data& h, half_buffer<float>& hb) {
-    const int w = h.img.width, ht = h.img.height;
+// A view of n channels of an interleaved buffer, from channel `first`.
+template <class T>
+bool channel_view(buffer_data& h, int first, int n, image_view<T>& v) {
     const std::ptrdiff_t ps = static_cast<std::ptrdiff_t>(h.img.channel_count() * sizeof(float));
-    float* base = h.img.pixels.data();
-    auto col = image_view<float>::create(base, w, ht, 3, ps);
-    auto var = image_view<float>::create(base + 3, w, ht, h.nv, ps);
-    if (!col.ok() || !var.ok()) return "internal: bad image layout";
-    hb.color = *col;
-    hb.variance = *var;
-    if (h.has_alpha) {
-        auto al = image_view<const float>::create(base + 3 + h.nv, w, ht, 1, ps);
-        if (!al.ok()) return "internal: bad alpha layout";
-        hb.alpha = *al;
-    }
-    return {};
+    auto r = image_view<T>::create(h.img.pixels.data() + first, h.img.width, h.img.height, n, ps);
+    if (!r.ok()) return false;
+    v = *r;
+    return true;
 }
 
-// Combined image: (A + B) / 2, variance of the mean vA / 4 + vB / 4, alpha averaged. The
-// variance sum is taken in double: for finite inputs it is at most FLT_MAX / 2, so FLT_MAX
-// variances stay finite (0.25f * (a + b) in float overflowed to Inf); Inf and NaN pass as is.
-image combine(const half_data (&h)[2]) {
+// Two halves: colour, variance, alpha, as firefly::detector takes them.
+std::string pair_views(buffer_data& h, half_buffer<float>& hb) {
+    const int a = h.has_alpha ? 1 : 0;
+    bool ok = channel_view(h, 0, 3, hb.color) && channel_view(h, 3 + a, h.nv, hb.variance);
+    if (ok && a) ok = channel_view(h, 3, 1, hb.alpha);
+    return ok ? std::string() : "internal: bad image layout";
+}
+
+// 3 or more buffers. A render's alpha goes to the detector as a 4th colour channel (carried
+// along: checked for NaN/Inf and rebuilt with the colour). With variance it cannot (the
+// detector wants 1 variance channel or one per colour channel), so there it is averaged as read.
+std::string cross_views(buffer_data& h, buffer_view<float>& v) {
+    const int a = h.has_alpha ? 1 : 0;
+    bool ok = channel_view(h, 0, h.nv == 0 ? 3 + a : 3, v.color);
+    if (ok && h.nv > 0) ok = channel_view(h, 3 + a, h.nv, v.variance);
+    return ok ? std::string() : "internal: bad image layout";
+}
+
+// Mean of sample s over the buffers. Two keep the half-buffer mode's float formula
+// 0.5 a + 0.5 b, bit for bit; more are summed in double.
+float mean_at(const std::vector<buffer_data>& h, std::size_t s) {
+    if (h.size() == 2) return 0.5f * h[0].img.pixels[s] + 0.5f * h[1].img.pixels[s];
+    double sum = 0;
+    for (const buffer_data& b : h) sum += b.img.pixels[s];
+    return static_cast<float>(sum / static_cast<double>(h.size()));
+}
+
+// The variance of the mean of K buffers that each carry the variance of their own mean:
+// sum / K^2, in double, so FLT_MAX variances stay finite (two halves: vA / 4 + vB / 4, as the
+// half-buffer mode always wrote; 0.25f * (a + b) in float overflowed). Inf and NaN pass as is.
+float summed_variance_at(const std::vector<buffer_data>& h, std::size_t s) {
+    double sum = 0;
+    for (const buffer_data& b : h) sum += b.img.pixels[s];
+    const double k = static_cast<double>(h.size());
+    return static_cast<float>(sum / (k * k));
+}
+
+// Renders carry no variance: that of their mean comes from their spread, the sample
+// variance / N, in double.
+float spread_variance_at(const std::vector<buffer_data>& h, std::size_t s) {
+    const double n = static_cast<double>(h.size());
+    double sum = 0, ss = 0;
+    for (const buffer_data& b : h) sum += b.img.pixels[s];
+    const double mean = sum / n;
+    for (const buffer_data& b : h) ss += (b.img.pixels[s] - mean) * (b.img.pixels[s] - mean);
+    return static_cast<float>(ss / (n - 1) / n);
+}
+
+// The output: the mean of the buffers and the variance of that mean; channels colour,
+// variance (the inputs', or for renders --variance's names), alpha (averaged) if present.
+image combine(const options& c, const std::vector<buffer_data>& h) {
+    const buffer_data& first = h[0];
+    const std::vector<std::string>& in = first.img.channels;
+    const std::size_t a = first.has_alpha ? 1 : 0, nv = first.nv == 0 ? 3 : static_cast<std::size_t>(first.nv);
+    const bool spread = first.nv == 0;
     image comb;
-    comb.width = h[0].img.width;
-    comb.height = h[0].img.height;
-    comb.channels = h[0].img.channels;  // colour, variance [, alpha], as read
-    comb.data_window = h[0].img.data_window;
-    comb.display_window = h[0].img.display_window;
-    const std::size_t stride = comb.channels.size(), nv = static_cast<std::size_t>(h[0].nv);
+    comb.width = first.img.width;
+    comb.height = first.img.height;
+    comb.data_window = first.img.data_window;
+    comb.display_window = first.img.display_window;
+    comb.channels.assign(in.begin(), in.begin() + 3);
+    if (spread) comb.channels.insert(comb.channels.end(), c.variance.begin(), c.variance.end());
+    else comb.channels.insert(comb.channels.end(), in.begin() + 3 + a, in.begin() + 3 + a + nv);
+    if (a) comb.channels.push_back(in[3]);
+    const std::size_t in_stride = in.size(), out_stride = comb.channels.size();
     const std::size_t np = static_cast<std::size_t>(comb.width) * static_cast<std::size_t>(comb.height);
-    comb.pixels.resize(np * stride);
+    comb.pixels.resize(np * out_stride);
     for (std::size_t i = 0; i < np; ++i) {
-        const float* a = &h[0].img.pixels[i * stride];
-        const float* b = &h[1].img.pixels[i * stride];
-        float* o = &comb.pixels[i * stride];
-        for (std::size_t k = 0; k < 3; ++k) o[k] = 0.5f * a[k] + 0.5f * b[k];
-        for (std::size_t k = 3; k < 3 + nv; ++k) o[k] = static_cast<float>(0.25 * a[k] + 0.25 * b[k]);
-        if (h[0].has_alpha) o[3 + nv] = 0.5f * a[3 + nv] + 0.5f * b[3 + nv];
+        const std::size_t s = i * in_stride;
+        float* o = &comb.pixels[i * out_stride];
+        for (std::size_t k = 0; k < 3; ++k) o[k] = mean_at(h, s + k);
+        for (std::size_t k = 0; k < nv; ++k)
+            o[3 + k] = spread ? spread_variance_at(h, s + k) : summed_variance_at(h, s + 3 + a + k);
+        if (a) o[3 + nv] = mean_at(h, s + 3);
     }
     return comb;
 }
 
-image mask_image(const std::vector<std::uint8_t>& mask, const image& like) {
+// A mask file, one 0/1 channel per bit: firefly::detector's four for two buffers, the
+// K-buffer detector's two (firefly, nonfinite) for more.
+image mask_image(const std::vector<std::uint8_t>& mask, const image& like, bool pair) {
+    static const char* const names[4] = {"firefly", "highlight", "consistent", "nonfinite"};
+    static const std::uint8_t bits[4] = {mask_bits::firefly, mask_bits::highlight, mask_bits::consistent,
+                                         mask_bits::nonfinite};
+    const std::vector<std::size_t> used = pair ? std::vector<std::size_t>{0, 1, 2, 3} : std::vector<std::size_t>{0, 3};
     image m;
     m.width = like.width;
     m.height = like.height;
     m.data_window = like.data_window;
     m.display_window = like.display_window;
-    m.channels = {"firefly", "highlight", "consistent", "nonfinite"};
-    m.pixels.resize(mask.size() * 4);
-    const std::uint8_t bits[4] = {mask_bits::firefly, mask_bits::highlight, mask_bits::consistent, mask_bits::nonfinite};
+    for (std::size_t b : used) m.channels.push_back(names[b]);
+    const std::size_t n = used.size();
+    m.pixels.resize(mask.size() * n);
     for (std::size_t k = 0; k < mask.size(); ++k)
-        for (std::size_t b = 0; b < 4; ++b) m.pixels[k * 4 + b] = (mask[k] & bits[b]) ? 1.0f : 0.0f;
+        for (std::size_t j = 0; j < n; ++j) m.pixels[k * n + j] = (mask[k] & bits[used[j]]) ? 1.0f : 0.0f;
     return m;
 }
 
@@ -272,6 +382,109 @@ json half_json(const half_report& h) {
                 {"final_change", h.final_change}};
 }
 
+// The counts every mode reports, in the K-buffer detector's terms.
+void put_counts(json& rec, const cross_buffer_report& r) {
+    rec["buffers"] = r.buffers;
+    rec["pixels"] = r.pixels;
+    rec["tested"] = r.tested;
+    rec["fireflies"] = r.fireflies;
+    rec["nonfinite"] = r.nonfinite;
+    rec["left"] = r.left;
+    rec["per_buffer"] = r.per_buffer;
+}
+
+// Two halves' report in those terms (as cross_buffer_detector does for K = 2).
+cross_buffer_report pair_counts(const frame_report& r) {
+    cross_buffer_report c;
+    c.buffers = 2;
+    c.pixels = r.half[0].pixels;
+    c.tested = r.half[0].valid;
+    for (const half_report& h : r.half) {
+        c.fireflies += h.fireflies;
+        c.nonfinite += h.nonfinite;
+        c.left += h.unreachable;
+        c.per_buffer.push_back(h.fireflies + h.nonfinite);
+    }
+    return c;
+}
+
+using mask_list = std::vector<std::vector<std::uint8_t>>;
+
+image_view<std::uint8_t> mask_view(std::vector<std::uint8_t>& m, const image& like) {
+    return *make_image_view(m.data(), like.width, like.height);
+}
+
+// Two buffers: firefly::detector (the one inside the K-buffer detector, whose lambda cache
+// serves the whole sequence), with alpha. Fills the report record and the progress text.
+std::string clean_pair(detector& d, std::vector<buffer_data>& h, mask_list& masks, json& rec, std::string& line) {
+    half_buffer<float> hb[2];
+    image_view<std::uint8_t> mv[2];
+    for (std::size_t i = 0; i < 2; ++i) {
+        if (std::string e = pair_views(h[i], hb[i]); !e.empty()) return e;
+        if (!masks.empty()) mv[i] = mask_view(masks[i], h[i].img);
+    }
+    const frame_report r = d.process(hb[0], hb[1], mv[0], mv[1]);
+    if (!r.error.ok() && r.error.code() == errc::no_valid_pixels)
+        return std::string("no valid pixel to rebuild from (every pixel is NaN/Inf, black or an outlier): ") +
+               r.error.message();
+    if (!r.error.ok()) return std::string("cannot clean the frame: ") + r.error.message();
+    for (int i = 0; i < 2; ++i)
+        if (!r.half[i].reconstruction.ok())
+            return std::string("half ") + "AB"[i] +
+                   (r.half[i].reconstruction.code() == errc::no_valid_pixels
+                        ? " has no valid pixel to rebuild from (every pixel is NaN/Inf, black or an outlier)"
+                        : std::string(": reconstruction failed: ") + r.half[i].reconstruction.message());
+    rec["both_outliers"] = r.both_outliers;
+    rec["variance_calibration"] = r.variance_calibration;
+    rec["lambdas_computed"] = r.lambdas_computed;
+    rec["a"] = half_json(r.half[0]);
+    rec["b"] = half_json(r.half[1]);
+    put_counts(rec, pair_counts(r));
+    char text[160];
+    std::snprintf(text, sizeof text, "fireflies %zu + %zu, highlights kept %zu, non-finite repaired %zu + %zu",
+                  r.half[0].fireflies, r.half[1].fireflies, r.half[0].highlights, r.half[0].repaired, r.half[1].repaired);
+    line = text;
+    return {};
+}
+
+// 3 or more buffers: firefly::cross_buffer_detector.
+std::string clean_cross(const options& c, cross_buffer_detector& xd, std::vector<buffer_data>& h, mask_list& masks,
+                        json& rec, std::string& line) {
+    std::vector<buffer_view<float>> views(h.size());
+    std::vector<image_view<std::uint8_t>> mv;
+    for (std::size_t i = 0; i < h.size(); ++i) {
+        if (std::string e = cross_views(h[i], views[i]); !e.empty()) return e;
+        if (!masks.empty()) mv.push_back(mask_view(masks[i], h[i].img));
+    }
+    const cross_buffer_report r = xd.process(views, mv);
+    if (r.left > 0)
+        return std::to_string(r.left) + " pixels have NaN/Inf in more than half of the " + inputs_noun(c) +
+               ": nothing to rebuild them from";
+    if (!r.ok()) return std::string("cannot clean the frame: ") + r.error.message();
+    put_counts(rec, r);
+    line = "fireflies " + std::to_string(r.fireflies) + " (per " + (c.mode == input_mode::renders ? "render" : "buffer") + ":";
+    for (std::size_t n : r.per_buffer) line += " " + std::to_string(n);
+    line += "), non-finite repaired " + std::to_string(r.nonfinite);
+    return {};
+}
+
+// Writes a cleaned frame's files to temporaries: the main output first, so that it is
+// renamed last.
+std::string write_outputs(const options& c, const frame_files& f, const std::vector<buffer_data>& h,
+                          const mask_list& masks, const image& before, firefly_tools::output_set& set) {
+    const image comb = combine(c, h);
+    std::string e = write_exr_to(set, f.out, comb);
+    for (std::size_t i = 0; i < f.halves.size() && e.empty(); ++i) e = write_exr_to(set, f.halves[i], h[i].img);
+    for (std::size_t i = 0; i < f.masks.size() && e.empty(); ++i)
+        e = write_exr_to(set, f.masks[i], mask_image(masks[i], comb, h.size() == 2));
+    const std::size_t stride = comb.channels.size();
+    const int w = comb.width, ht = comb.height;
+    if (e.empty() && !c.preview.empty()) e = write_png_to(set, f.preview[0], before.pixels.data(), w, ht, stride, c.exposure);
+    if (e.empty() && !c.preview.empty()) e = write_png_to(set, f.preview[1], comb.pixels.data(), w, ht, stride, c.exposure);
+    if (e.empty()) e = set.close_all();
+    return e;
+}
+
 using clock_type = std::chrono::steady_clock;
 double ms_since(clock_type::time_point t) { return std::chrono::duration<double, std::milli>(clock_type::now() - t).count(); }
 
@@ -283,94 +496,81 @@ struct frame_result {
     std::string error;
 };
 
-// Cleans a frame read into h[0], h[1] and writes its outputs to temporaries.
-std::string clean_frame(const options& c, detector& d, const frame_files& f, half_data (&h)[2], frame_result& fr) {
-    const int w = h[0].img.width, ht = h[0].img.height;
-    const std::size_t np = static_cast<std::size_t>(w) * static_cast<std::size_t>(ht);
-    half_buffer<float> hb[2];
-    for (int i = 0; i < 2; ++i)
-        if (std::string e = views_of(h[i], hb[i]); !e.empty()) return e;
-    std::vector<std::uint8_t> mask[2];
-    image_view<std::uint8_t> mv[2];
-    for (int i = 0; i < 2 && !c.masks.empty(); ++i) {
-        mask[i].assign(np, 0);
-        mv[i] = *make_image_view(mask[i].data(), w, ht);
-    }
-    image before;  // the combined input, for the preview
-    if (!c.preview.empty()) before = combine(h);
+// Cleans a frame read into h and writes its outputs to temporaries.
+std::string clean_frame(const options& c, cross_buffer_detector& xd, const frame_files& f, std::vector<buffer_data>& h,
+                        frame_result& fr) {
+    const image& first = h[0].img;
+    const std::size_t np = static_cast<std::size_t>(first.width) * static_cast<std::size_t>(first.height);
+    mask_list masks(c.masks.empty() ? 0 : h.size(), std::vector<std::uint8_t>(c.masks.empty() ? 0 : np, 0));
+    image before;  // the mean of the inputs, for the preview
+    if (!c.preview.empty()) before = combine(c, h);
+    fr.record["width"] = first.width;
+    fr.record["height"] = first.height;
+    std::string line;
     const auto t1 = clock_type::now();
-    const frame_report r = d.process(hb[0], hb[1], mv[0], mv[1]);
+    std::string e = h.size() == 2 ? clean_pair(xd.pair_detector(), h, masks, fr.record, line)
+                                  : clean_cross(c, xd, h, masks, fr.record, line);
     const double process_ms = ms_since(t1);
-    if (!r.error.ok() && r.error.code() == errc::no_valid_pixels)
-        return std::string("no valid pixel to rebuild from (every pixel is NaN/Inf, black or an outlier): ") +
-               r.error.message();
-    if (!r.error.ok()) return std::string("cannot clean the frame: ") + r.error.message();
-    for (int i = 0; i < 2; ++i)
-        if (!r.half[i].reconstruction.ok())
-            return std::string("half ") + "AB"[i] +
-                   (r.half[i].reconstruction.code() == errc::no_valid_pixels
-                        ? " has no valid pixel to rebuild from (every pixel is NaN/Inf, black or an outlier)"
-                        : std::string(": reconstruction failed: ") + r.half[i].reconstruction.message());
-    const auto t2 = clock_type::now();
-    const image comb = combine(h);
-    // The main output is opened first so that it is renamed last.
-    std::string e = write_exr_to(fr.outputs, f.out, comb);
-    for (int i = 0; i < 2 && e.empty() && !c.halves.empty(); ++i) e = write_exr_to(fr.outputs, f.halves[i], h[i].img);
-    for (int i = 0; i < 2 && e.empty() && !c.masks.empty(); ++i)
-        e = write_exr_to(fr.outputs, f.masks[i], mask_image(mask[i], comb));
-    const std::size_t stride = comb.channels.size();
-    if (e.empty() && !c.preview.empty()) e = write_png_to(fr.outputs, f.preview[0], before.pixels.data(), w, ht, stride, c.exposure);
-    if (e.empty() && !c.preview.empty()) e = write_png_to(fr.outputs, f.preview[1], comb.pixels.data(), w, ht, stride, c.exposure);
-    if (e.empty()) e = fr.outputs.close_all();
     if (!e.empty()) return e;
-    fr.record["width"] = w;
-    fr.record["height"] = ht;
-    fr.record["both_outliers"] = r.both_outliers;
-    fr.record["variance_calibration"] = r.variance_calibration;
-    fr.record["lambdas_computed"] = r.lambdas_computed;
+    const auto t2 = clock_type::now();
+    if (e = write_outputs(c, f, h, masks, before, fr.outputs); !e.empty()) return e;
     fr.record["milliseconds"] = json{{"read", fr.record["milliseconds"]["read"]}, {"process", process_ms}, {"write", ms_since(t2)}};
-    fr.record["a"] = half_json(r.half[0]);
-    fr.record["b"] = half_json(r.half[1]);
     if (!c.quiet)
-        std::printf("%s: %dx%d, fireflies %zu + %zu, highlights kept %zu, non-finite repaired %zu + %zu, %.1f ms\n",
-                    f.out.c_str(), w, ht, r.half[0].fireflies, r.half[1].fireflies, r.half[0].highlights,
-                    r.half[0].repaired, r.half[1].repaired, process_ms);
+        std::printf("%s: %dx%d, %s, %.1f ms\n", f.out.c_str(), first.width, first.height, line.c_str(), process_ms);
     return {};
 }
 
 // One frame: read, check, clean, write to temporaries. fr.error is empty on success.
-void run_frame(const options& c, detector& d, long long frame, frame_result& fr) {
+void run_frame(const options& c, cross_buffer_detector& xd, long long frame, frame_result& fr) {
     const frame_files f = files_of(c, frame);
-    fr.record = json{{"frame", frame}, {"half_a", f.a}, {"half_b", f.b}, {"output", f.out}};
+    fr.record = json{{"frame", frame}};
+    if (c.mode == input_mode::halves) {
+        fr.record["half_a"] = f.in[0];
+        fr.record["half_b"] = f.in[1];
+    } else {
+        fr.record["inputs"] = f.in;
+    }
+    fr.record["output"] = f.out;
     const auto t0 = clock_type::now();
-    half_data h[2];
-    fr.error = read_half(c, f.a, f.va, h[0]);
-    if (fr.error.empty()) fr.error = read_half(c, f.b, f.vb, h[1]);
-    if (fr.error.empty()) fr.error = check_halves(c, f, h);
+    std::vector<buffer_data> h(f.in.size());
+    for (std::size_t i = 0; i < h.size() && fr.error.empty(); ++i) fr.error = read_buffer(c, f.in[i], f.var[i], h[i]);
+    if (fr.error.empty()) fr.error = check_buffers(c, f, h);
     fr.record["milliseconds"]["read"] = ms_since(t0);
-    if (fr.error.empty()) fr.error = clean_frame(c, d, f, h, fr);
+    if (fr.error.empty()) fr.error = clean_frame(c, xd, f, h, fr);
     if (!fr.error.empty()) fr.outputs.discard();
 }
 
+// The options of the detector that ran: firefly::detector's for two buffers, the K-buffer
+// detector's for more.
 json options_json(const options& c) {
     static const char* reductions[] = {"mean", "luminance", "max"};
     static const char* lambdas[] = {"exact", "hill", "normal"};
     static const char* rules[] = {"same_pixel", "agree", "confident", "confident_and_agree"};
+    static const char* modes[] = {"halves", "buffers", "renders"};
+    json j{{"mode", modes[static_cast<int>(c.mode)]}, {"buffers", c.buffers()}};
+    if (c.buffers() > 2) {
+        j["false_alarm"] = c.x.false_alarm;
+        j["radius"] = c.x.radius;
+        j["use_variance"] = c.x.use_variance;
+        j["threads"] = c.threads;
+        return j;
+    }
     const auto& o = c.o;
-    return json{{"significance", o.alpha},
-                {"bound", o.bound_threshold},
-                {"reduction", reductions[static_cast<int>(o.reduction) % 3]},
-                {"lambdas", lambdas[static_cast<int>(o.lambdas) % 3]},
-                {"highlight_rule", rules[static_cast<int>(o.highlight.rule) % 4]},
-                {"max_relative_error", o.highlight.max_relative_error},
-                {"max_ratio", o.highlight.max_ratio},
-                {"min_excess_z", o.highlight.min_excess_z},
-                {"cluster_relative_error", o.highlight.cluster_relative_error},
-                {"kernel", o.reconstruction.kernel_width},
-                {"sigma", o.reconstruction.sigma},
-                {"tolerance", o.reconstruction.tolerance},
-                {"iterations", o.reconstruction.max_iterations},
-                {"threads", c.threads}};
+    j.update(json{{"significance", o.alpha},
+                  {"bound", o.bound_threshold},
+                  {"reduction", reductions[static_cast<int>(o.reduction) % 3]},
+                  {"lambdas", lambdas[static_cast<int>(o.lambdas) % 3]},
+                  {"highlight_rule", rules[static_cast<int>(o.highlight.rule) % 4]},
+                  {"max_relative_error", o.highlight.max_relative_error},
+                  {"max_ratio", o.highlight.max_ratio},
+                  {"min_excess_z", o.highlight.min_excess_z},
+                  {"cluster_relative_error", o.highlight.cluster_relative_error},
+                  {"kernel", o.reconstruction.kernel_width},
+                  {"sigma", o.reconstruction.sigma},
+                  {"tolerance", o.reconstruction.tolerance},
+                  {"iterations", o.reconstruction.max_iterations},
+                  {"threads", c.threads}});
+    return j;
 }
 
 // The report as text. Paths are not always UTF-8: invalid bytes become U+FFFD.
@@ -400,7 +600,9 @@ int run(const options& c) {
             std::fprintf(stderr, "firefly: %s\n", e.c_str());
             return 1;
         }
-    detector d(c.o, executor::threads(c.threads));
+    cross_buffer_options xo = c.x;
+    xo.pair = c.o;
+    cross_buffer_detector xd(xo, executor::threads(c.threads));
     json frames = json::array();
     std::size_t failed = 0;
     firefly_tools::output_set pending;  // a single frame's outputs wait for the report
@@ -409,7 +611,7 @@ int run(const options& c) {
     long long index = 0;
     for (long long f = first; f <= last; f += c.step, ++index) {
         frame_result fr;
-        run_frame(c, d, f, fr);
+        run_frame(c, xd, f, fr);
         if (fr.error.empty() && c.sequence) fr.error = fr.outputs.commit();
         if (!fr.error.empty()) {
             ++failed;

@@ -24,6 +24,12 @@ struct file_id {
     ino_t ino = 0;
     std::string leaf;  // empty for an existing file
     bool operator==(const file_id& o) const { return dev == o.dev && ino == o.ino && leaf == o.leaf; }
+    // An order, for sets of ids: a sequence of K buffers names K files per frame.
+    bool operator<(const file_id& o) const {
+        if (dev != o.dev) return dev < o.dev;
+        if (ino != o.ino) return ino < o.ino;
+        return leaf < o.leaf;
+    }
 };
 
 inline std::string parent_dir(const std::string& path) {
