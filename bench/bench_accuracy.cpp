@@ -169,7 +169,7 @@ buffers_fn firefly_buffers() {
 void add_buffer_configs(std::vector<config>& c, int k) {
     const std::string K = std::to_string(k);
     const bool ds = k > 2;  // at K = 2 their output is the input's: no NL-means column needed
-    if (k >= 4) c.push_back({"firefly_k" + K, {}, firefly_buffers(), false});  // no variance here
+    if (k >= 4) c.push_back({"firefly_k" + K, {}, firefly_buffers(), ds});  // no variance here
     c.push_back({"mean_k" + K, {}, [](const firefly_peers::buffer_list& b, int w, int h, float* out) {
                      firefly_peers::mean_of_buffers(b, static_cast<std::size_t>(w) * h, out);
                  }, false});
@@ -241,6 +241,8 @@ void brightness_cuts(const std::vector<float>& ref, double& dark, double& bright
 }
 
 // relMSE, changed, made worse and energy of a combined output against the reference.
+void count_lowered(benchmark::State& st, const scene_data& s, const std::vector<float>& out);
+
 void count_metrics(benchmark::State& st, const scene_data& s, const std::vector<float>& out) {
     const std::size_t np = s.pixels();
     double dark_cut, bright_cut;
@@ -270,6 +272,23 @@ void count_metrics(benchmark::State& st, const scene_data& s, const std::vector<
     st.counters["worse_of_changed"] = changed ? static_cast<double>(worse) / static_cast<double>(changed) : 0.0;
     const char* names[3] = {"energy", "energy_dark", "energy_bright"};
     for (int k = 0; k < 3; ++k) st.counters[names[k]] = sum_ref[k] > 0 ? sum_out[k] / sum_ref[k] : 1.0;
+    count_lowered(st, s, out);
+}
+
+// Highlight pixels whose output is not below the input (mean colour, beyond round-off): kept
+// as highlights, nothing taken from them. A method that only adds energy back (energy.hpp)
+// changes pixels without lowering any; "highlight_kept" (unchanged) counts those as lost.
+void count_lowered(benchmark::State& st, const scene_data& s, const std::vector<float>& out) {
+    if (!s.truth || s.truth->highlight.size() != s.pixels()) return;
+    std::size_t hl = 0, kept = 0;
+    for (std::size_t p = 0; p < s.pixels(); ++p) {
+        if (!s.truth->highlight[p]) continue;
+        ++hl;
+        const double o = (static_cast<double>(out[p * 3]) + out[p * 3 + 1] + out[p * 3 + 2]) / 3.0;
+        const double in = (static_cast<double>(s.input[p * 3]) + s.input[p * 3 + 1] + s.input[p * 3 + 2]) / 3.0;
+        kept += !std::isfinite(in) || o >= in - 1e-6 * std::fabs(in);
+    }
+    st.counters["highlight_not_lowered"] = hl ? static_cast<double>(kept) / static_cast<double>(hl) : 1.0;
 }
 
 // Recall, false positives, highlights kept, from the simulator's ground truth.

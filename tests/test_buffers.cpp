@@ -155,6 +155,7 @@ TEST_CASE("K buffers: a firefly in one buffer is removed, nothing else moves", "
             for (auto& m : mem) masks.push_back(*make_image_view(m.data(), 24, 16));
             cross_buffer_options o;
             o.use_variance = var;
+            o.return_energy = false;  // the rebuild alone (the energy return: tests below)
             cross_buffer_detector d(o);
             const cross_buffer_report r = d.process(f.views(var), masks);
             REQUIRE(r.ok());
@@ -305,4 +306,121 @@ TEST_CASE("K buffers: detect() on const views changes nothing and reports what p
         CHECK(seen.per_buffer == done.per_buffer);
         CHECK(done.fireflies > 0);
     }
+}
+
+// The energy return (energy.hpp): nothing for a lone firefly, most of it where many fell,
+// nothing far away, flips give flipped bits, and extreme values stay finite.
+namespace {
+frame_k constant_frame(int k, int w, int h, float level) {
+    frame_k f;
+    f.w = w;
+    f.h = h;
+    for (int b = 0; b < k; ++b) {
+        f.color.emplace_back(static_cast<std::size_t>(w * h * 3), level);
+        f.variance.emplace_back(static_cast<std::size_t>(w * h * 3), 0.0f);
+    }
+    return f;
+}
+double region_mean(const frame_k& f, int x0, int y0, int x1, int y1) {
+    double s = 0;
+    for (const auto& c : f.color)
+        for (int y = y0; y < y1; ++y)
+            for (int x = x0; x < x1; ++x) s += c[static_cast<std::size_t>((y * f.w + x) * 3)];
+    return s / (static_cast<double>(f.color.size()) * (x1 - x0) * (y1 - y0));
+}
+}  // namespace
+
+TEST_CASE("K buffers: a lone firefly's energy is not spread", "[buffers][energy]") {
+    frame_k f = constant_frame(8, 40, 30, 0.25f);
+    const std::size_t at = (15 * 40 + 20) * 3;
+    for (int c = 0; c < 3; ++c) f.color[3][at + static_cast<std::size_t>(c)] = 500.0f;
+    const frame_k before = f;
+    cross_buffer_detector d;
+    const cross_buffer_report r = d.process(f.views(false));
+    REQUIRE(r.ok());
+    CHECK(r.fireflies == 1);
+    CHECK(r.energy_removed > 0);
+    CHECK(r.energy_returned == 0);
+    std::size_t changed = 0;
+    for (int b = 0; b < 8; ++b)
+        for (std::size_t i = 0; i < f.color[0].size(); ++i)
+            changed += f.color[static_cast<std::size_t>(b)][i] != before.color[static_cast<std::size_t>(b)][i];
+    CHECK(changed == 3);
+}
+
+TEST_CASE("K buffers: where fireflies are dense their energy comes back, and only there", "[buffers][energy]") {
+    const int w = 96, h = 64, k = 8;
+    frame_k f = noisy_frame(k, w, h, 21);
+    std::uint32_t s = 12345;
+    auto next = [&] { return s = s * 1664525u + 1013904223u; };
+    for (int y = 16; y < 48; ++y)  // a 32 x 32 patch: one pixel in 4 gets a firefly in one buffer
+        for (int x = 8; x < 40; ++x)
+            if (next() % 4 == 0) {
+                const std::size_t b = (next() >> 8) % k, i = static_cast<std::size_t>((y * w + x) * 3);
+                for (int c = 0; c < 3; ++c) f.color[b][i + static_cast<std::size_t>(c)] += 30.0f;
+            }
+    const frame_k before = f;
+    frame_k without = f;
+    cross_buffer_options off;
+    off.return_energy = false;
+    cross_buffer_detector d, d_off(off);
+    const cross_buffer_report r = d.process(f.views(false));
+    REQUIRE(d_off.process(without.views(false)).ok());
+    REQUIRE(r.ok());
+    // Inside the patch's core the mean is close to the input's (which holds the fireflies'
+    // energy, unbiased); removing alone loses most of it.
+    const double in = region_mean(before, 16, 24, 32, 40), out = region_mean(f, 16, 24, 32, 40);
+    const double removed_only = region_mean(without, 16, 24, 32, 40);
+    INFO("input " << in << ", returned " << out << ", removed only " << removed_only);
+    CHECK(std::fabs(out - in) < 0.25 * (in - removed_only));
+    CHECK(r.energy_returned > 0.5 * r.energy_removed);
+    CHECK(r.energy_returned <= 1.05 * r.energy_removed);
+    // Far from the patch (beyond 3 sigma = 24 px) nothing but the rebuild moved.
+    std::size_t moved = 0;
+    for (std::size_t b = 0; b < k; ++b)
+        for (int y = 0; y < h; ++y)
+            for (int x = 72; x < w; ++x) {
+                const std::size_t i = static_cast<std::size_t>((y * w + x) * 3);
+                moved += f.color[b][i] != without.color[b][i];
+            }
+    CHECK(moved == 0);
+}
+
+TEST_CASE("K buffers: a flipped frame gives the flipped result, energy return included", "[buffers][energy]") {
+    const sim::buffers orig = sim::simulate_buffers(sim::named_scene("dense10", 72, 40, 5), 8);
+    frame_k f = from_sim(orig), g = from_sim(orig);
+    const int w = f.w, h = f.h;
+    for (auto& c : g.color)
+        for (int y = 0; y < h; ++y)
+            for (int x = 0; x < w / 2; ++x)
+                for (int ch = 0; ch < 3; ++ch)
+                    std::swap(c[static_cast<std::size_t>((y * w + x) * 3 + ch)], c[static_cast<std::size_t>((y * w + w - 1 - x) * 3 + ch)]);
+    cross_buffer_detector d;
+    const cross_buffer_report rf = d.process(f.views(false)), rg = d.process(g.views(false));
+    REQUIRE(rf.ok());
+    REQUIRE(rg.ok());
+    CHECK(rf.energy_returned > 0);
+    std::size_t differ = 0;
+    for (std::size_t b = 0; b < f.color.size(); ++b)
+        for (int y = 0; y < h; ++y)
+            for (int x = 0; x < w; ++x)
+                for (int ch = 0; ch < 3; ++ch)
+                    differ += f.color[b][static_cast<std::size_t>((y * w + x) * 3 + ch)] !=
+                              g.color[b][static_cast<std::size_t>((y * w + w - 1 - x) * 3 + ch)];
+    CHECK(differ == 0);
+}
+
+TEST_CASE("K buffers: 1e30 fireflies next to 1e-3 pixels stay finite", "[buffers][energy]") {
+    frame_k f = noisy_frame(8, 32, 24, 8);
+    for (auto& c : f.color)
+        for (float& v : c) v *= 1e-3f;
+    for (int i = 0; i < 6; ++i)  // several near each other: their energy is returned
+        for (int c = 0; c < 3; ++c) f.color[static_cast<std::size_t>(i)][static_cast<std::size_t>(((10 + i) * 32 + 12 + i) * 3 + c)] = 1e30f;
+    cross_buffer_detector d;
+    const cross_buffer_report r = d.process(f.views(false));
+    REQUIRE(r.ok());
+    CHECK(r.fireflies >= 6);
+    CHECK(std::isfinite(r.energy_returned));
+    for (const auto& c : f.color)
+        for (const float v : c) CHECK(std::isfinite(v));
 }

@@ -82,6 +82,7 @@
 #include <memory>
 #include <vector>
 
+#include "energy.hpp"
 #include "image_view.hpp"
 #include "parallel.hpp"
 #include "pipeline.hpp"
@@ -107,6 +108,9 @@ struct cross_buffer_options {
                                  // spread measured better at 8-16 samples per buffer
     bool reconstruct = true;     // false: detect and report only
     int radius = 1;              // the noise is pooled over (2 radius + 1)^2 pixels (0 to 8)
+    bool return_energy = true;   // K >= 3, 3 or 4 channels: the removed fireflies' energy is
+                                 // returned where many agree on it (energy.hpp)
+    double energy_sigma = 8.0;   // its Gaussian's width in pixels (1 to 64)
     detector_options pair{};     // K = 2: firefly::detector's options
 };
 
@@ -114,6 +118,8 @@ inline status check_cross_buffer_options(const cross_buffer_options& o) noexcept
     if (!(o.false_alarm > 0.0 && o.false_alarm < 0.5))
         return status{errc::invalid_argument, "false_alarm must lie in (0, 0.5)"};
     if (o.radius < 0 || o.radius > 8) return status{errc::invalid_argument, "radius must lie in [0, 8]"};
+    if (!(o.energy_sigma >= 1.0 && o.energy_sigma <= 64.0))
+        return status{errc::invalid_argument, "energy_sigma must lie in [1, 64]"};
     return ok_status();
 }
 
@@ -127,6 +133,8 @@ struct [[nodiscard]] cross_buffer_report {
     std::size_t nonfinite = 0;   // pixel-buffers with NaN/Inf, rebuilt from the others
     std::size_t left = 0;        // pixels with more than K / 2 non-finite buffers, unchanged
     std::vector<std::size_t> per_buffer;  // fireflies and non-finite, per buffer
+    double energy_removed = 0;   // sum over pixels of the mean colour the fireflies took from
+    double energy_returned = 0;  // the frame's mean image, and of what energy.hpp gave back
     frame_report pair{};         // K = 2: firefly::detector's report
 };
 
@@ -349,6 +357,8 @@ private:
             thresholds_.fill(options_.false_alarm, k, df);
         const int h = b[0].color.height();
         noise_.resize(rep.pixels);
+        if (returns_energy(b, k, clean)) excess_.assign(rep.pixels * 3, 0.0);
+        else excess_.clear();
         exec_.run(static_cast<std::size_t>(h), [&](std::size_t y) {
             noise_row(b, k, has_var, with_var, static_cast<int>(y));
         });
@@ -356,6 +366,7 @@ private:
         exec_.run(static_cast<std::size_t>(h), [&](std::size_t y) {
             run_row(b, k, masks, clean, has_var, with_var, static_cast<int>(y), counts[y]);
         });
+        if (returns_energy(b, k, clean)) return_energy(b, k, rep);
         for (const row_counts& c : counts) {
             rep.tested += c.tested;
             rep.fireflies += c.fireflies;
@@ -485,7 +496,7 @@ private:
 
     template <class C, class V>
     void run_row(const buffer_view<C, V>* b, int k, const image_view<std::uint8_t>* masks, bool clean,
-                 bool has_var, bool with_var, int y, row_counts& rc) const {
+                 bool has_var, bool with_var, int y, row_counts& rc) {
         detail::pixel_buffers p;
         p.k = k;
         const int w = b[0].color.width();
@@ -504,7 +515,7 @@ private:
             rc.nonfinite += static_cast<std::size_t>(bad);
             for (int i = 0; i < k; ++i) rc.per_buffer[static_cast<std::size_t>(i)] += p.flagged[static_cast<std::size_t>(i)];
             write_masks(masks, p, x, y);
-            if (clean && (flags > 0 || bad > 0)) rebuild(b, p, x, y, has_var);
+            if (clean && (flags > 0 || bad > 0)) rebuild(b, p, x, y, has_var, excess_.empty() ? nullptr : &excess_[index(x, y, w) * 3]);
         }
     }
 
@@ -517,8 +528,10 @@ private:
     }
 
     // Flagged buffers take the mean of the clean ones (in sorted order: no buffer order).
+    // excess (3 channels, or null): what the finite flagged buffers lose, over K.
     template <class C, class V>
-    static void rebuild(const buffer_view<C, V>* b, const detail::pixel_buffers& p, int x, int y, bool has_var) {
+    static void rebuild(const buffer_view<C, V>* b, const detail::pixel_buffers& p, int x, int y, bool has_var,
+                        double* excess) {
         if constexpr (!std::is_const_v<C> && !std::is_const_v<V>) {
             const int nc = b[0].color.channels();
             const int nv = has_var ? b[0].variance.channels() : 0;
@@ -531,6 +544,12 @@ private:
                 for (int c = 0; c < nc; ++c) col[static_cast<std::size_t>(c)] += b[i].color.load(x, y, c);
                 for (int c = 0; c < nv; ++c) var[static_cast<std::size_t>(c)] += std::max(b[i].variance.load(x, y, c), 0.0);
             }
+            for (int j = 0; j < p.usable && excess; ++j) {  // sorted order, finite buffers only
+                const int i = p.order[static_cast<std::size_t>(j)];
+                if (!p.flagged[static_cast<std::size_t>(i)]) continue;
+                for (int c = 0; c < 3; ++c)
+                    excess[c] += (b[i].color.load(x, y, c) - col[static_cast<std::size_t>(c)] / n) / p.k;
+            }
             for (int i = 0; i < p.k; ++i) {
                 if (!p.flagged[static_cast<std::size_t>(i)]) continue;
                 for (int c = 0; c < nc; ++c) b[i].color.store(x, y, c, col[static_cast<std::size_t>(c)] / n);
@@ -539,11 +558,81 @@ private:
         }
     }
 
+    static std::size_t index(int x, int y, int w) noexcept {
+        return static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+    }
+
+    template <class C, class V>
+    bool returns_energy(const buffer_view<C, V>* b, int k, bool clean) const noexcept {
+        return clean && options_.return_energy && k >= 3 && b[0].color.channels() >= 3 && !std::is_const_v<C>;
+    }
+
+    // After the rebuild: the clean mean image, the energy to return (energy.hpp), added to
+    // every buffer alike (the same value: the buffers' order still does not matter).
+    template <class C, class V>
+    void return_energy(const buffer_view<C, V>* b, int k, cross_buffer_report& rep) {
+        const int w = b[0].color.width(), h = b[0].color.height();
+        mean_.assign(excess_.size(), 0.0);
+        error_.assign(excess_.size() / 3, 0.0);
+        exec_.run(static_cast<std::size_t>(h), [&](std::size_t row) {
+            const int y = static_cast<int>(row);
+            for (int x = 0; x < w; ++x) {
+                double level[max_k_levels] = {};
+                for (int c = 0; c < 3; ++c) {
+                    double sum = 0;
+                    for (int i = 0; i < k; ++i) {
+                        const double v = b[i].color.load(x, y, c);
+                        sum += v;
+                        level[i] += v / 3.0;
+                    }
+                    const double m = sum / k;
+                    mean_[index(x, y, w) * 3 + static_cast<std::size_t>(c)] = std::isfinite(m) && m > 0 ? m : 0.0;
+                }
+                error_[index(x, y, w)] = standard_error(level, k);
+            }
+        });
+        energy_return(excess_, mean_, w, h, options_.energy_sigma, returned_, energy_, exec_);
+        if constexpr (!std::is_const_v<C>)
+            exec_.run(static_cast<std::size_t>(h), [&](std::size_t row) {
+                const int y = static_cast<int>(row);
+                for (int x = 0; x < w; ++x) {
+                    double* add = &returned_[index(x, y, w) * 3];
+                    // Only where the return is larger than the pixel's own noise (the standard
+                    // error of its mean level): below it the change cannot lower the pixel's
+                    // expected error by much, and the pixel is left as it was.
+                    if (!((add[0] + add[1] + add[2]) / 3.0 > error_[index(x, y, w)])) {
+                        add[0] = add[1] = add[2] = 0.0;
+                        continue;
+                    }
+                    for (int c = 0; c < 3; ++c)
+                        if (add[c] > 0)
+                            for (int i = 0; i < k; ++i) b[i].color.store(x, y, c, b[i].color.load(x, y, c) + add[c]);
+                }
+            });
+        for (std::size_t i = 0; i < excess_.size(); ++i) {
+            rep.energy_removed += excess_[i] / 3.0;
+            rep.energy_returned += returned_[i] / 3.0;
+        }
+    }
+
     cross_buffer_options options_;
     executor exec_;
     detector pair_;
     detail::cross_thresholds thresholds_{};
     std::vector<double> noise_;  // per pixel: its own relative variance of y (NaN: unknown)
+    std::vector<double> excess_, mean_, returned_;  // energy return: 3 channels per pixel
+    std::vector<double> error_;                     // standard error of each pixel's mean level
+    static constexpr int max_k_levels = detail::max_buffers;
+
+    // The standard error of the mean of k levels (their spread / sqrt(k)); k >= 3 here.
+    static double standard_error(const double* level, int k) noexcept {
+        double mean = 0, ss = 0;
+        for (int i = 0; i < k; ++i) mean += level[i] / k;
+        for (int i = 0; i < k; ++i) ss += (level[i] - mean) * (level[i] - mean);
+        const double se = std::sqrt(ss / (k - 1) / k);
+        return std::isfinite(se) ? se : HUGE_VAL;
+    }
+    energy_scratch energy_;
 };
 
 }  // namespace firefly

@@ -1,0 +1,155 @@
+// firefly: the energy a firefly removal takes away, returned where it belongs.
+//
+// A firefly is a rare, huge sample, but not a wrong one: its path carries real light, and a
+// converged render holds that light as a smooth glow over the region where such paths land
+// (a caustic, the bounce light of a small lamp). Removing fireflies lowers the noise and biases
+// the image low by the fireflies' expected share. Where fireflies are dense, that share is
+// large (half of a caustic's light can arrive as fireflies) and it can be estimated from the
+// removed energy itself: spread over a neighbourhood, the removed excess is an estimate of the
+// fireflies' local contribution, noisy where few fireflies fell and good where many did.
+//
+// Model: the fireflies' contribution at p is a local ratio times the pixel's clean radiance
+// (light that arrives along rare paths lands on what the ordinary paths light too, in
+// proportion). With e the removed excess per pixel and channel, P the clean image's 3x3
+// median (the clean image with any spike the test let through taken out), G a Gaussian of
+// sigma pixels (normalised weights w):
+//     M = G * e,  L = G * P,  ratio = M / L,  returned(p) = s(p) ratio(p) P(p)
+// s is the positive-part James-Stein factor of M: V = sum_q w_q^2 e_q^2 (channel sums) is the
+// variance M would have if each e_q were one draw of a sparse process, so
+//     s = max(0, 1 - V / |M|^2)
+// keeps M where many fireflies agree on it and drops it where one or two make it up: a lone
+// firefly (V = |M|^2) returns nothing, so no glow is painted around it. The sum over q of
+// w_q^2 e_q^2 is an exact Gaussian blur at sigma / sqrt(2) of e^2, rescaled.
+//
+// Every blur sums opposite taps first (v[-i] + v[+i]): a flipped frame gives the flipped
+// result bit for bit. Arithmetic in double: a 1e30 excess squared stays finite.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <vector>
+
+#include "parallel.hpp"
+
+namespace firefly {
+
+namespace detail {
+
+// Normalised 1-D Gaussian weights w[0..r] (w[i] for offsets +-i); r = 3 sigma unless given.
+inline std::vector<double> gaussian_weights(double sigma, int r = 0) {
+    if (r <= 0) r = std::max(1, static_cast<int>(std::ceil(3.0 * sigma)));
+    std::vector<double> w(static_cast<std::size_t>(r) + 1);
+    double sum = 0;
+    for (int i = 0; i <= r; ++i) {
+        w[static_cast<std::size_t>(i)] = std::exp(-0.5 * i * i / (sigma * sigma));
+        sum += i == 0 ? w[0] : 2.0 * w[static_cast<std::size_t>(i)];
+    }
+    for (double& v : w) v /= sum;
+    return w;
+}
+
+// One separable pass over nch interleaved channels: along x (step = nch) or along y (step =
+// w * nch). Outside the frame counts as 0. Rows (or columns) as tasks on the executor.
+inline void blur_pass(const double* in, double* out, int w, int h, int nch, const std::vector<double>& k,
+                      bool along_x, const executor& exec) {
+    const int r = static_cast<int>(k.size()) - 1;
+    const int n = along_x ? w : h, lines = along_x ? h : w;
+    const std::ptrdiff_t step = along_x ? nch : static_cast<std::ptrdiff_t>(w) * nch;
+    const std::ptrdiff_t line_step = along_x ? static_cast<std::ptrdiff_t>(w) * nch : nch;
+    exec.run(static_cast<std::size_t>(lines), [&](std::size_t line) {
+        const double* src = in + static_cast<std::ptrdiff_t>(line) * line_step;
+        double* dst = out + static_cast<std::ptrdiff_t>(line) * line_step;
+        for (int i = 0; i < n; ++i)
+            for (int c = 0; c < nch; ++c) {
+                double s = k[0] * src[i * step + c];
+                for (int d = 1; d <= r; ++d) {
+                    const double lo = i - d >= 0 ? src[(i - d) * step + c] : 0.0;
+                    const double hi = i + d < n ? src[(i + d) * step + c] : 0.0;
+                    s += k[static_cast<std::size_t>(d)] * (lo + hi);
+                }
+                dst[i * step + c] = s;
+            }
+    });
+}
+
+// Separable Gaussian blur of nch interleaved channels in place (tmp: scratch of the same size).
+inline void gaussian_blur(std::vector<double>& v, std::vector<double>& tmp, int w, int h, int nch,
+                          const std::vector<double>& k, const executor& exec) {
+    tmp.resize(v.size());
+    blur_pass(v.data(), tmp.data(), w, h, nch, k, true, exec);
+    blur_pass(tmp.data(), v.data(), w, h, nch, k, false, exec);
+}
+
+// 3x3 median of each of 3 interleaved channels (the frame's edge: the pixels inside it).
+inline void median3x3(const std::vector<double>& in, std::vector<double>& out, int w, int h, const executor& exec) {
+    out.resize(in.size());
+    exec.run(static_cast<std::size_t>(h), [&](std::size_t row) {
+        const int y = static_cast<int>(row);
+        for (int x = 0; x < w; ++x)
+            for (int c = 0; c < 3; ++c) {
+                double t[9] = {};
+                int n = 0;
+                for (int yy = std::max(0, y - 1); yy <= std::min(h - 1, y + 1); ++yy)
+                    for (int xx = std::max(0, x - 1); xx <= std::min(w - 1, x + 1); ++xx)
+                        t[n++] = in[(static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(xx)) * 3 + static_cast<std::size_t>(c)];
+                std::nth_element(t, t + n / 2, t + n);
+                double m = t[n / 2];
+                if (n % 2 == 0) m = 0.5 * (m + *std::max_element(t, t + n / 2));  // mean of the middle two
+                out[(static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)) * 3 + static_cast<std::size_t>(c)] = m;
+            }
+    });
+}
+
+}  // namespace detail
+
+// Frame-sized work arrays of the energy return, kept between frames.
+struct energy_scratch {
+    std::vector<double> profile, m, l, v, tmp;
+    std::size_t bytes() const noexcept {
+        return (profile.capacity() + m.capacity() + l.capacity() + v.capacity() + tmp.capacity()) * sizeof(double);
+    }
+};
+
+// The energy to add back per pixel and channel (3 interleaved channels, w x h), from the
+// removed excess `excess` and the clean image `clean` (both 3 channels; 0 where nothing was
+// removed). Writes `returned` (same layout). sigma: the Gaussian's width in pixels.
+inline void energy_return(const std::vector<double>& excess, const std::vector<double>& clean, int w, int h,
+                          double sigma, std::vector<double>& returned, energy_scratch& s, const executor& exec) {
+    const std::size_t np = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
+    const std::vector<double> k = detail::gaussian_weights(sigma);
+    // the squared weights' kernel over the same support: V is then exact at every offset
+    // where M is not 0 (a lone firefly: V = |M|^2 everywhere)
+    const std::vector<double> k2 = detail::gaussian_weights(sigma / std::sqrt(2.0), static_cast<int>(k.size()) - 1);
+    // sum w_q^2 x_q = (S2 / S^2)^2 (G' * x) in 2-D, S and S2 the unnormalised 1-D sums of
+    // the two kernels (w = g / S, w^2 = g' / S^2 with g' the sigma / sqrt(2) kernel, = G' S2 / S^2).
+    double s1 = 0, s2 = 0;
+    for (std::size_t i = 0; i < k.size(); ++i) s1 += (i ? 2.0 : 1.0) * std::exp(-0.5 * double(i * i) / (sigma * sigma));
+    for (std::size_t i = 0; i < k2.size(); ++i) s2 += (i ? 2.0 : 1.0) * std::exp(-double(i * i) / (sigma * sigma));
+    const double scale = (s2 / (s1 * s1)) * (s2 / (s1 * s1));
+    detail::median3x3(clean, s.profile, w, h, exec);
+    s.m = excess;
+    s.l = s.profile;
+    s.v.resize(np);
+    for (std::size_t p = 0; p < np; ++p)
+        s.v[p] = excess[p * 3] * excess[p * 3] + excess[p * 3 + 1] * excess[p * 3 + 1] + excess[p * 3 + 2] * excess[p * 3 + 2];
+    detail::gaussian_blur(s.m, s.tmp, w, h, 3, k, exec);
+    detail::gaussian_blur(s.l, s.tmp, w, h, 3, k, exec);
+    detail::gaussian_blur(s.v, s.tmp, w, h, 1, k2, exec);
+    returned.assign(np * 3, 0.0);
+    for (std::size_t p = 0; p < np; ++p) {
+        const double* m = &s.m[p * 3];
+        const double m2 = m[0] * m[0] + m[1] * m[1] + m[2] * m[2];
+        const double keep = m2 > 0 ? 1.0 - s.v[p] * scale / m2 : 0.0;
+        // a lone firefly gives keep = 0 up to rounding (1e-9: far above it, far below any
+        // second firefly's share); nothing removed nearby gives m2 = 0
+        if (!(keep > 1e-9) || !std::isfinite(m2)) continue;
+        for (int c = 0; c < 3; ++c) {
+            const double l = s.l[p * 3 + static_cast<std::size_t>(c)];
+            const double add = l > 0 ? keep * (m[c] / l) * s.profile[p * 3 + static_cast<std::size_t>(c)] : 0.0;
+            returned[p * 3 + static_cast<std::size_t>(c)] = std::isfinite(add) && add > 0 ? add : 0.0;
+        }
+    }
+}
+
+}  // namespace firefly
