@@ -279,6 +279,14 @@ inline void add_cross_options(CLI::App& app, options& c) {
                  "--buffers with 4 or more files: the noise from the files' variances instead of the spread of "
                  "the buffers (3 files always use them)")
         ->group(cross_group);
+    app.add_flag_callback("--no-energy-return", [&c] { c.x.return_energy = false; },
+                          "remove fireflies only: do not give back the energy of fireflies that fell densely "
+                          "(firefly/energy.hpp)")
+        ->group(cross_group);
+    app.add_option("--energy-sigma", c.x.energy_sigma, "width in pixels of the energy return's Gaussian")
+        ->type_name("X")
+        ->check(number_in(1, 64, false, false, "a number from 1 to 64"))
+        ->group(cross_group);
 }
 
 // Channel names must be distinct: a colour, variance or alpha channel read twice would be

@@ -391,6 +391,8 @@ void put_counts(json& rec, const cross_buffer_report& r) {
     rec["nonfinite"] = r.nonfinite;
     rec["left"] = r.left;
     rec["per_buffer"] = r.per_buffer;
+    rec["energy_removed"] = r.energy_removed;
+    rec["energy_returned"] = r.energy_returned;
 }
 
 // Two halves' report in those terms (as cross_buffer_detector does for K = 2).
@@ -552,6 +554,8 @@ json options_json(const options& c) {
         j["false_alarm"] = c.x.false_alarm;
         j["radius"] = c.x.radius;
         j["use_variance"] = c.x.use_variance;
+        j["return_energy"] = c.x.return_energy;
+        j["energy_sigma"] = c.x.energy_sigma;
         j["threads"] = c.threads;
         return j;
     }
