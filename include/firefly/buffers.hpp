@@ -261,6 +261,12 @@ public:
         pair_.set_options(o.pair);
     }
     detector& pair_detector() noexcept { return pair_; }
+    // Work memory kept between frames, bytes (the K = 2 detector's included).
+    std::size_t scratch_bytes() const noexcept {
+        return (noise_.capacity() + excess_.capacity() + mean_.capacity() + returned_.capacity() + error_.capacity()) *
+                   sizeof(double) +
+               energy_.bytes() + pair_.scratch_bytes();
+    }
 
     // Cleans the k buffers in place. masks (optional, k views of 1 channel, frame-sized)
     // receive mask_bits::firefly / nonfinite per pixel and buffer.

@@ -105,6 +105,7 @@ public:
     }
     void clear() noexcept { ratios_.clear(); }
     std::size_t size() const noexcept { return ratios_.size(); }
+    std::size_t bytes() const noexcept { return ratios_.capacity() * sizeof(double); }
 
 private:
     std::vector<double> ratios_;

@@ -125,6 +125,11 @@ struct local_flags {
 };
 
 struct local_test_result {
+    std::size_t bytes() const noexcept {
+        std::size_t n = 0;
+        for (const local_flags& f : half) n += f.index.capacity() * sizeof(std::uint32_t) + f.score.capacity() * sizeof(float);
+        return n;
+    }
     local_flags half[2];
     std::size_t tested = 0;        // pixels tested (each tests both halves)
     std::size_t screened = 0;      // pixels whose neighbourhood statistics were computed

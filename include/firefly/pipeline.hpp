@@ -184,14 +184,16 @@ public:
     const std::shared_ptr<lambda_cache>& shared_lambdas() const noexcept { return cache_; }
 
     std::size_t scratch_bytes() const noexcept {
-        std::size_t n = cache_->bytes() + local_scratch_.bytes();
+        std::size_t n = cache_->bytes() + local_scratch_.bytes() + local_result_.bytes() + calibration_.bytes() +
+                        pairs_.capacity() * sizeof(std::uint32_t) + pool_.capacity() * sizeof(float);
         for (const auto& h : halves_)
             n += h.sd.capacity() * sizeof(float) + h.label.capacity() +
                  h.hist.bytes() + h.select_f.capacity() * sizeof(float) +
                  h.select.capacity() * sizeof(double) + h.order.capacity() * sizeof(std::uint32_t) +
                  h.removed.capacity() * sizeof(double) + h.keys.capacity() * sizeof(std::uint64_t) +
                  (h.fix.capacity() + h.cross.capacity()) * sizeof(std::uint32_t) +
-                 h.cross_values.capacity() * sizeof(double) + h.decision.capacity() + h.recon.bytes();
+                 h.cross_values.capacity() * sizeof(double) + h.decision.capacity() +
+                 h.band_counts.capacity() * sizeof(stddev_counts) + h.recon.bytes();
         return n;
     }
 
