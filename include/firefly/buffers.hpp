@@ -263,7 +263,8 @@ public:
     detector& pair_detector() noexcept { return pair_; }
     // Work memory kept between frames, bytes (the K = 2 detector's included).
     std::size_t scratch_bytes() const noexcept {
-        return (noise_.capacity() + excess_.capacity() + mean_.capacity() + returned_.capacity() + error_.capacity()) *
+        return (noise_.capacity() + excess_.capacity() + mean_.capacity() + profile_.capacity() + returned_.capacity() +
+                error_.capacity()) *
                    sizeof(double) +
                energy_.bytes() + pair_.scratch_bytes();
     }
@@ -597,7 +598,13 @@ private:
                 error_[index(x, y, w)] = standard_error(level, k);
             }
         });
-        energy_return(excess_, mean_, w, h, options_.energy_sigma, returned_, energy_, exec_);
+        // the profile: the input's mean (the clean mean plus what was removed), whose 3x3
+        // median keeps where fireflies fall densely (a caustic lit mostly by them) and drops
+        // the lone ones; the clean mean alone misplaces that light at high K (few samples
+        // a buffer: most of a caustic's light is then flagged)
+        profile_.resize(mean_.size());
+        for (std::size_t i = 0; i < mean_.size(); ++i) profile_[i] = mean_[i] + excess_[i];
+        energy_return(excess_, profile_, w, h, options_.energy_sigma, returned_, energy_, exec_);
         if constexpr (!std::is_const_v<C>)
             exec_.run(static_cast<std::size_t>(h), [&](std::size_t row) {
                 const int y = static_cast<int>(row);
@@ -626,7 +633,7 @@ private:
     detector pair_;
     detail::cross_thresholds thresholds_{};
     std::vector<double> noise_;  // per pixel: its own relative variance of y (NaN: unknown)
-    std::vector<double> excess_, mean_, returned_;  // energy return: 3 channels per pixel
+    std::vector<double> excess_, mean_, profile_, returned_;  // energy return: 3 channels per pixel
     std::vector<double> error_;                     // standard error of each pixel's mean level
     static constexpr int max_k_levels = detail::max_buffers;
 

@@ -8,11 +8,12 @@
 // removed energy itself: spread over a neighbourhood, the removed excess is an estimate of the
 // fireflies' local contribution, noisy where few fireflies fell and good where many did.
 //
-// Model: the fireflies' contribution at p is a local ratio times the pixel's clean radiance
-// (light that arrives along rare paths lands on what the ordinary paths light too, in
-// proportion). With e the removed excess per pixel and channel, P the clean image's 3x3
-// median (the clean image with any spike the test let through taken out), G a Gaussian of
-// sigma pixels (normalised weights w):
+// Model: the fireflies' contribution at p is a local ratio times the pixel's radiance (light
+// that arrives along rare paths lands where the image is bright, in proportion). With e the
+// removed excess per pixel and channel, P the 3x3 median of the image the caller gives (the
+// K-buffer detector gives the input's mean: the median drops lone fireflies and keeps where
+// they fall densely, as in a caustic lit mostly by them), G a Gaussian of sigma pixels
+// (normalised weights w):
 //     M = G * e,  L = G * P,  ratio = M / L,  returned(p) = s(p) ratio(p) P(p)
 // s is the positive-part James-Stein factor of M: V = sum_q w_q^2 e_q^2 (channel sums) is the
 // variance M would have if each e_q were one draw of a sparse process, so
@@ -112,9 +113,10 @@ struct energy_scratch {
 };
 
 // The energy to add back per pixel and channel (3 interleaved channels, w x h), from the
-// removed excess `excess` and the clean image `clean` (both 3 channels; 0 where nothing was
-// removed). Writes `returned` (same layout). sigma: the Gaussian's width in pixels.
-inline void energy_return(const std::vector<double>& excess, const std::vector<double>& clean, int w, int h,
+// removed excess `excess` (0 where nothing was removed) and the image whose 3x3 median shapes
+// the return, `shape` (3 channels, finite, >= 0). Writes `returned` (same layout). sigma: the
+// Gaussian's width in pixels.
+inline void energy_return(const std::vector<double>& excess, const std::vector<double>& shape, int w, int h,
                           double sigma, std::vector<double>& returned, energy_scratch& s, const executor& exec) {
     const std::size_t np = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
     const std::vector<double> k = detail::gaussian_weights(sigma);
@@ -127,7 +129,7 @@ inline void energy_return(const std::vector<double>& excess, const std::vector<d
     for (std::size_t i = 0; i < k.size(); ++i) s1 += (i ? 2.0 : 1.0) * std::exp(-0.5 * double(i * i) / (sigma * sigma));
     for (std::size_t i = 0; i < k2.size(); ++i) s2 += (i ? 2.0 : 1.0) * std::exp(-double(i * i) / (sigma * sigma));
     const double scale = (s2 / (s1 * s1)) * (s2 / (s1 * s1));
-    detail::median3x3(clean, s.profile, w, h, exec);
+    detail::median3x3(shape, s.profile, w, h, exec);
     s.m = excess;
     s.l = s.profile;
     s.v.resize(np);
