@@ -8,12 +8,15 @@
 // every K and only the way it is split changes. Each frame is cleaned by the mean of the K
 // buffers, median of means (M = K; M = 4 too where K >= 8), G-MoN (M = K) at each threshold of
 // {0.1, 0.25, 0.4} (bench/peers.hpp, the estimators bench_accuracy.cpp runs), and
-// firefly::cross_buffer_detector at its default options: K = 2 hands the pair to
+// firefly::cross_buffer_detector twice: at its default options (the energy return of
+// energy.hpp on, K >= 3 only) and with return_energy = false. K = 2 hands the pair to
 // firefly::detector (variance required), K = 3 needs the variances, K >= 4 gets colour only,
 // because its default (use_variance = false) judges from the spread of the buffers and a
 // renderer need not keep variance for it (the memory section checks that the output is the
 // same with them). relMSE is sim::relmse against the expected radiance, as in the accuracy
-// bench. The Markdown goes to stdout and to OUT.md.
+// bench; "highlights not lowered" counts highlight pixels whose mean colour did not go down,
+// as bench_accuracy.cpp's highlight_not_lowered (the energy return changes pixels only by
+// adding light). The Markdown goes to stdout and to OUT.md.
 #include <firefly/firefly.hpp>
 #include <firefly/sim/metrics.hpp>
 #include <firefly/sim/scene.hpp>
@@ -151,18 +154,36 @@ std::string label(const std::string& name) {
 
 constexpr std::array<double, 3> gmon_thresholds = {0.1, 0.25, 0.4};
 
+// One cleaning method on one frame (NaN: not measured). Shares are of all pixels, or of the
+// highlight pixels (NaN when the scene has none).
+struct method_result {
+    double relmse = NAN;
+    double majority = NAN;        // the part of relmse from pixels with fireflies in more than K / 2 buffers
+    double changed = NAN;         // share of pixels changed
+    double hl_kept = NAN;         // share of highlight pixels unchanged
+    double hl_not_lowered = NAN;  // share of highlight pixels whose mean colour did not go down
+    double ms = NAN;              // process() wall clock
+    bool ok = true;
+};
+
+enum method { m_firefly, m_plain, m_gmon, m_mean, method_count };
+constexpr const char* method_names[method_count] = {"firefly", "firefly, no energy return", "G-MoN", "mean"};
+
 struct frame_result {
-    double mean = 0, mon_k = 0, mon_4 = NAN;
-    std::array<double, 3> gmon{}, gmon_changed{}, gmon_hl{};
-    double ff = 0, ff_changed = 0, ff_hl = 0, ff_ms = 0;
-    double ff_majority = 0;  // the part of ff from pixels with fireflies in more than K / 2 buffers
-    bool ff_ok = true;
+    method_result ff, ff_plain, mean;  // firefly at its defaults, with return_energy = false
+    std::array<method_result, 3> gmon{};
+    double mon_k = 0, mon_4 = NAN;
+    bool plain_same = false;  // ff_plain's buffers bit-identical to ff's
 };
 
 firefly_peers::buffer_list buffer_list(const sim::buffers& b) {
     firefly_peers::buffer_list l;
     for (const auto& c : b.color) l.push_back(c.data());
     return l;
+}
+
+bool has_highlights(const std::vector<std::uint8_t>& highlight) {
+    return std::any_of(highlight.begin(), highlight.end(), [](std::uint8_t v) { return v != 0; });
 }
 
 // As bench_accuracy.cpp: changed when a channel moved by more than float round-off (the
@@ -175,19 +196,37 @@ bool pixel_changed(const float* out, const float* in) {
     return false;
 }
 
-// Share of pixels changed from `in`, and share of highlight pixels left as they were
-// (NaN when the scene has none).
-void change_counts(const std::vector<float>& out, const std::vector<float>& in,
-                   const std::vector<std::uint8_t>& highlight, double& changed, double& kept) {
+double mean_colour(const float* p) { return (static_cast<double>(p[0]) + p[1] + p[2]) / 3.0; }
+
+// As bench_accuracy.cpp's highlight_not_lowered: highlight pixels whose mean colour in `out`
+// is not below `in`'s beyond 1e-6 relative (a non-finite input counts as not lowered). The
+// energy return only adds light, so a highlight it touches is changed but not lowered.
+double highlights_not_lowered(const std::vector<float>& out, const std::vector<float>& in,
+                              const std::vector<std::uint8_t>& highlight) {
+    std::size_t hl = 0, kept = 0;
+    for (std::size_t p = 0; p < highlight.size(); ++p) {
+        if (!highlight[p]) continue;
+        ++hl;
+        const double o = mean_colour(&out[p * 3]), i = mean_colour(&in[p * 3]);
+        kept += !std::isfinite(i) || o >= i - 1e-6 * std::fabs(i);
+    }
+    return hl ? static_cast<double>(kept) / static_cast<double>(hl) : NAN;
+}
+
+// A one-image method against its input (the mean): pixels changed, highlights unchanged and
+// not lowered.
+void compare_to_input(const std::vector<float>& out, const std::vector<float>& in,
+                      const std::vector<std::uint8_t>& highlight, method_result& m) {
     std::size_t n = 0, hl = 0, hl_kept = 0;
     for (std::size_t p = 0; p < highlight.size(); ++p) {
         const bool c = pixel_changed(&out[p * 3], &in[p * 3]);
         n += c;
-        hl += highlight[p];
+        hl += highlight[p] != 0;
         hl_kept += highlight[p] && !c;
     }
-    changed = static_cast<double>(n) / static_cast<double>(highlight.size());
-    kept = hl ? static_cast<double>(hl_kept) / static_cast<double>(hl) : NAN;
+    m.changed = static_cast<double>(n) / static_cast<double>(highlight.size());
+    m.hl_kept = hl ? static_cast<double>(hl_kept) / static_cast<double>(hl) : NAN;
+    m.hl_not_lowered = highlights_not_lowered(out, in, highlight);
 }
 
 // The mean, median of means and G-MoN; `mean` is also the input the others are compared to.
@@ -196,7 +235,7 @@ void run_estimators(const sim::buffers& b, int k, frame_result& r) {
     const std::size_t np = b.pixels();
     std::vector<float> mean(np * 3), out(np * 3);
     firefly_peers::mean_of_buffers(bl, np, mean.data());
-    r.mean = sim::relmse(mean.data(), b.expected.data(), np);
+    r.mean.relmse = sim::relmse(mean.data(), b.expected.data(), np);
     firefly_peers::median_of_means(bl, np, k, out.data());
     r.mon_k = sim::relmse(out.data(), b.expected.data(), np);
     if (k >= 8) {
@@ -205,8 +244,8 @@ void run_estimators(const sim::buffers& b, int k, frame_result& r) {
     }
     for (std::size_t t = 0; t < gmon_thresholds.size(); ++t) {
         firefly_peers::gmon(bl, np, k, gmon_thresholds[t], out.data());
-        r.gmon[t] = sim::relmse(out.data(), b.expected.data(), np);
-        change_counts(out, mean, b.highlight, r.gmon_changed[t], r.gmon_hl[t]);
+        r.gmon[t].relmse = sim::relmse(out.data(), b.expected.data(), np);
+        compare_to_input(out, mean, b.highlight, r.gmon[t]);
     }
 }
 
@@ -226,6 +265,20 @@ struct buffer_copy {
 
 // The detector's defaults: variance where it is required (K <= 3), none beyond.
 bool default_variance(int k) { return k <= 3; }
+
+cross_buffer_options without_return() {
+    cross_buffer_options o;
+    o.return_energy = false;
+    return o;
+}
+
+bool same_bits(const std::vector<std::vector<float>>& a, const std::vector<std::vector<float>>& b) {
+    if (a.size() != b.size()) return false;
+    for (std::size_t i = 0; i < a.size(); ++i)
+        if (a[i].size() != b[i].size() || std::memcmp(a[i].data(), b[i].data(), a[i].size() * sizeof(float)) != 0)
+            return false;
+    return true;
+}
 
 // Share of pixels where any buffer changed.
 double buffers_changed(const sim::buffers& b, const std::vector<std::vector<float>>& cleaned) {
@@ -257,18 +310,42 @@ double majority_hit_error(const sim::buffers& b, const std::vector<float>& combi
     return sim::relmse(part.data(), ref.data(), np);
 }
 
-void run_firefly(cross_buffer_detector& det, const sim::buffers& b, int k, frame_result& r) {
+// One detector's pass over a copy of the frame; `input` is the combined image of the
+// uncleaned buffers, `cleaned` receives the cleaned colour.
+method_result run_firefly(cross_buffer_detector& det, const sim::buffers& b, int k, const std::vector<float>& input,
+                          std::vector<std::vector<float>>& cleaned) {
     buffer_copy work(b, default_variance(k));
+    method_result m;
     const auto t0 = std::chrono::steady_clock::now();
     const cross_buffer_report rep = det.process(work.views);
     const auto t1 = std::chrono::steady_clock::now();
-    r.ff_ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
-    r.ff_ok = rep.ok();
+    m.ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
+    m.ok = rep.ok();
     const sim::accuracy a = sim::evaluate_buffers(b, work.color);  // relMSE of the spp-weighted mean
-    r.ff = a.relmse;
-    r.ff_hl = a.highlight_kept;
-    r.ff_changed = buffers_changed(b, work.color);
-    r.ff_majority = majority_hit_error(b, sim::combine(b, work.color));
+    const std::vector<float> combined = sim::combine(b, work.color);
+    m.relmse = a.relmse;
+    m.majority = majority_hit_error(b, combined);
+    m.changed = buffers_changed(b, work.color);
+    m.hl_kept = has_highlights(b.highlight) ? a.highlight_kept : NAN;
+    m.hl_not_lowered = highlights_not_lowered(combined, input, b.highlight);
+    cleaned = std::move(work.color);
+    return m;
+}
+
+// One detector per K and option set, kept over every frame as a renderer keeps it.
+struct detector_pair {
+    cross_buffer_detector with_return, without{without_return()};
+};
+
+frame_result run_frame(detector_pair& d, const sim::buffers& b, int k) {
+    frame_result r;
+    run_estimators(b, k, r);
+    const std::vector<float> input = sim::combine(b, b.color);
+    std::vector<std::vector<float>> with, without;
+    r.ff = run_firefly(d.with_return, b, k, input, with);
+    r.ff_plain = run_firefly(d.without, b, k, input, without);
+    r.plain_same = same_bits(with, without);
+    return r;
 }
 
 // ---------------------------------------------------------------------------------------
@@ -286,11 +363,43 @@ double mean_over(const cell& c, F f) {
     return s / static_cast<double>(c.seeds.size());
 }
 
+// G-MoN's threshold with the lowest relMSE averaged over the seeds (chosen after the fact:
+// the most favourable choice for G-MoN).
+std::size_t best_gmon(const cell& c) {
+    std::size_t best = 0;
+    for (std::size_t t = 1; t < gmon_thresholds.size(); ++t)
+        if (mean_over(c, [&](const frame_result& r) { return r.gmon[t].relmse; }) <
+            mean_over(c, [&](const frame_result& r) { return r.gmon[best].relmse; }))
+            best = t;
+    return best;
+}
+
+const method_result& of(const frame_result& r, int m, std::size_t gmon_t) {
+    switch (m) {
+        case m_firefly: return r.ff;
+        case m_plain: return r.ff_plain;
+        case m_gmon: return r.gmon[gmon_t];
+        default: return r.mean;
+    }
+}
+
+// A method's field averaged over the seeds (G-MoN at its best threshold).
+double avg(const cell& c, int m, double method_result::*field) {
+    const std::size_t g = best_gmon(c);
+    return mean_over(c, [&](const frame_result& r) { return of(r, m, g).*field; });
+}
+
 // The fastest seed's time: the machine may be shared, and other work only ever adds time.
-double fastest(const cell& c) {
+double fastest(const cell& c, int m) {
     double t = INFINITY;
-    for (const frame_result& r : c.seeds) t = std::min(t, r.ff_ms);
+    for (const frame_result& r : c.seeds) t = std::min(t, of(r, m, 0).ms);
     return t;
+}
+
+int errors(const cell& c, int m) {
+    int n = 0;
+    for (const frame_result& r : c.seeds) n += !of(r, m, 0).ok;
+    return n;
 }
 
 double median(std::vector<double> v) {
@@ -299,23 +408,12 @@ double median(std::vector<double> v) {
     return n == 0 ? NAN : n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
-// G-MoN's threshold with the lowest relMSE averaged over the seeds (chosen after the fact:
-// the most favourable choice for G-MoN).
-std::size_t best_gmon(const cell& c) {
-    std::size_t best = 0;
-    for (std::size_t t = 1; t < gmon_thresholds.size(); ++t)
-        if (mean_over(c, [&](const frame_result& r) { return r.gmon[t]; }) <
-            mean_over(c, [&](const frame_result& r) { return r.gmon[best]; }))
-            best = t;
-    return best;
-}
-
 using key = std::tuple<int, std::string, int>;  // total, scene, K
 using results = std::map<key, cell>;
 
-// One detector per K, kept over every frame as a renderer keeps it (its caches warm up).
+// One detector pair per K, kept over every frame as a renderer keeps it (its caches warm up).
 void run_all(const study& s, results& res) {
-    std::map<int, cross_buffer_detector> detectors;
+    std::map<int, detector_pair> detectors;
     for (int total : s.totals)
         for (const std::string& name : s.scenes)
             for (int k : s.ks)
@@ -324,12 +422,10 @@ void run_all(const study& s, results& res) {
                     cell& c = res[{total, name, k}];
                     c.spp_min = *std::min_element(b.spp.begin(), b.spp.end());
                     c.spp_max = *std::max_element(b.spp.begin(), b.spp.end());
-                    frame_result r;
-                    run_estimators(b, k, r);
-                    run_firefly(detectors[k], b, k, r);
-                    c.seeds.push_back(r);
-                    std::fprintf(stderr, "total %d %s K=%d seed %d: firefly %.4g (%.1f ms)\n", total, name.c_str(),
-                                 k, seed, r.ff, r.ff_ms);
+                    c.seeds.push_back(run_frame(detectors[k], b, k));
+                    const frame_result& r = c.seeds.back();
+                    std::fprintf(stderr, "total %d %s K=%d seed %d: firefly %.4g (%.1f ms), no return %.4g (%.1f ms)\n",
+                                 total, name.c_str(), k, seed, r.ff.relmse, r.ff.ms, r.ff_plain.relmse, r.ff_plain.ms);
                 }
 }
 
@@ -352,15 +448,16 @@ double accumulator_measured(int k, int channels) {
 struct memory_row {
     int k = 0;
     double accumulator_formula = 0, accumulator_bytes = 0;
-    double peak = 0, kept = 0;   // per pixel, the largest over the scenes
-    double pair_scratch = 0;     // K = 2: firefly::detector::scratch_bytes(), largest over the scenes
+    double peak = 0, kept = 0;              // per pixel, the largest over the scenes (default options)
+    double plain_peak = 0, plain_kept = 0;  // the same with return_energy = false
+    double pair_scratch = 0;      // K = 2: firefly::detector::scratch_bytes(), largest over the scenes
     bool variance_neutral = true;  // K >= 4: the output is bit-identical with the variances given
 };
 
 // Heap of a fresh detector's first frame (its largest: later frames of the size reuse it).
-heap_use detector_heap(const sim::buffers& b, int k) {
+heap_use detector_heap(const sim::buffers& b, int k, const cross_buffer_options& o) {
     buffer_copy work(b, default_variance(k));
-    cross_buffer_detector det;
+    cross_buffer_detector det(o);
     return measure_heap([&] { (void)det.process(work.views); });
 }
 
@@ -379,28 +476,28 @@ bool same_with_variance(const sim::buffers& b) {
     cross_buffer_detector d1, d2;
     (void)d1.process(without.views);
     (void)d2.process(with.views);
-    return without.color == with.color;
+    return same_bits(without.color, with.color);
 }
 
-std::vector<memory_row> measure_memory(const study& s) {
-    std::vector<memory_row> rows;
+void add_heap(double& peak, double& kept, const heap_use& u, double np) {
+    peak = std::max(peak, static_cast<double>(u.peak) / np);
+    kept = std::max(kept, static_cast<double>(u.kept) / np);
+}
+
+memory_row measure_memory(const study& s, int k) {
     const double np = static_cast<double>(s.pixels());
-    for (int k : s.ks) {
-        memory_row m;
-        m.k = k;
-        m.accumulator_formula = accumulator_formula(k, 3);
-        m.accumulator_bytes = accumulator_measured(k, 3);
-        for (const std::string& name : s.scenes) {
-            const sim::buffers b = sim::simulate_buffers(make_scene(name, s, s.totals.front(), 1), k);
-            const heap_use u = detector_heap(b, k);
-            m.peak = std::max(m.peak, static_cast<double>(u.peak) / np);
-            m.kept = std::max(m.kept, static_cast<double>(u.kept) / np);
-            if (k == 2) m.pair_scratch = std::max(m.pair_scratch, pair_scratch(b) / np);
-            if (k >= 4) m.variance_neutral = m.variance_neutral && same_with_variance(b);
-        }
-        rows.push_back(m);
+    memory_row m;
+    m.k = k;
+    m.accumulator_formula = accumulator_formula(k, 3);
+    m.accumulator_bytes = accumulator_measured(k, 3);
+    for (const std::string& name : s.scenes) {
+        const sim::buffers b = sim::simulate_buffers(make_scene(name, s, s.totals.front(), 1), k);
+        add_heap(m.peak, m.kept, detector_heap(b, k, {}), np);
+        add_heap(m.plain_peak, m.plain_kept, detector_heap(b, k, without_return()), np);
+        if (k == 2) m.pair_scratch = std::max(m.pair_scratch, pair_scratch(b) / np);
+        if (k >= 4) m.variance_neutral = m.variance_neutral && same_with_variance(b);
     }
-    return rows;
+    return m;
 }
 
 // ---------------------------------------------------------------------------------------
@@ -424,76 +521,115 @@ std::string spp_text(const cell& c) {
     return c.spp_min == c.spp_max ? std::to_string(c.spp_min) : fmt("%d-%d", c.spp_min, c.spp_max);
 }
 
-// Per total: scenes down, K across; each cell firefly / G-MoN (best threshold) / mean.
-std::string headline(const study& s, const results& res, int total) {
-    std::string t = fmt("\n### relMSE at %d samples per pixel: firefly / G-MoN (best threshold) / mean\n\n| scene |", total);
+// A table head: the first columns, then one per K.
+std::string k_head(const study& s, const std::string& first, int first_columns) {
+    std::string t = "| " + first + " |";
     for (int k : s.ks) t += fmt(" K = %d |", k);
-    t += "\n|---|";
-    for (std::size_t i = 0; i < s.ks.size(); ++i) t += "---|";
-    t += "\n";
+    t += "\n|";
+    for (std::size_t i = 0; i < s.ks.size() + static_cast<std::size_t>(first_columns); ++i) t += "---|";
+    return t + "\n";
+}
+
+std::string relmse_text(const cell& c, int m) {
+    const int e = errors(c, m);
+    return num(avg(c, m, &method_result::relmse)) + (e ? fmt(" (%d err)", e) : "");
+}
+
+// Per total: each scene's methods down, K across.
+std::string headline(const study& s, const results& res, int total) {
+    std::string t = fmt("\n### relMSE at %d samples per pixel\n\n", total) + k_head(s, "scene | method", 2);
+    for (const std::string& name : s.scenes)
+        for (int m = 0; m < method_count; ++m) {
+            t += "| " + label(name) + " | " + method_names[m] + " |";
+            for (int k : s.ks) t += " " + relmse_text(res.at({total, name, k}), m) + " |";
+            t += "\n";
+        }
+    return t;
+}
+
+// Per total: median of means, M = K / M = 4 (K >= 8).
+std::string mon_table(const study& s, const results& res, int total) {
+    std::string t = fmt("\n### relMSE of median of means at %d samples per pixel: M = K / M = 4\n\n", total) +
+                    k_head(s, "scene", 1);
     for (const std::string& name : s.scenes) {
         t += "| " + label(name) + " |";
         for (int k : s.ks) {
             const cell& c = res.at({total, name, k});
-            const std::size_t g = best_gmon(c);
-            t += " " + num(mean_over(c, [](const frame_result& r) { return r.ff; })) + " / " +
-                 num(mean_over(c, [&](const frame_result& r) { return r.gmon[g]; })) + " / " +
-                 num(mean_over(c, [](const frame_result& r) { return r.mean; })) + " |";
+            t += " " + num(mean_over(c, [](const frame_result& r) { return r.mon_k; })) + " / " +
+                 num(mean_over(c, [](const frame_result& r) { return r.mon_4; })) + " |";
         }
         t += "\n";
     }
     return t;
 }
 
-std::string detail_row(int k, const cell& c) {
-    const std::size_t g = best_gmon(c);
-    auto m = [&](auto f) { return mean_over(c, f); };
-    int errors = 0;
-    for (const frame_result& r : c.seeds) errors += !r.ff_ok;
-    std::string row = fmt("| %d | %s | ", k, spp_text(c).c_str());
-    row += num(m([](const frame_result& r) { return r.mean; })) + " | " +
-           num(m([](const frame_result& r) { return r.mon_k; })) + " | " +
-           num(m([](const frame_result& r) { return r.mon_4; })) + " | " +
-           num(m([&](const frame_result& r) { return r.gmon[g]; })) + fmt(" (%.2g) | ", gmon_thresholds[g]) +
-           num(m([](const frame_result& r) { return r.ff; })) + (errors ? fmt(" (%d err)", errors) : "") + " | " +
-           num(m([](const frame_result& r) { return r.ff_majority; })) + " | " +
-           pct(m([](const frame_result& r) { return r.ff_changed; })) + " | " +
-           pct(m([&](const frame_result& r) { return r.gmon_changed[g]; })) + " | " +
-           pct(m([](const frame_result& r) { return r.ff_hl; })) + " | " +
-           pct(m([&](const frame_result& r) { return r.gmon_hl[g]; })) + " | " + fmt("%.1f |\n", fastest(c));
-    return row;
+std::string detail_row(int k, const cell& c, int m) {
+    std::string name = method_names[m];
+    if (m == m_gmon) name += fmt(" (t = %.2g)", gmon_thresholds[best_gmon(c)]);
+    const double ms = m == m_gmon ? NAN : fastest(c, m);
+    return fmt("| %d | %s | %s | ", k, spp_text(c).c_str(), name.c_str()) + relmse_text(c, m) + " | " +
+           num(avg(c, m, &method_result::majority)) + " | " + pct(avg(c, m, &method_result::changed)) + " | " +
+           pct(avg(c, m, &method_result::hl_kept)) + " | " + pct(avg(c, m, &method_result::hl_not_lowered)) +
+           " | " + (std::isnan(ms) ? std::string("-") : fmt("%.1f", ms)) + " |\n";
 }
 
 std::string details(const study& s, const results& res, int total) {
     std::string t;
     for (const std::string& name : s.scenes) {
         t += fmt("\n#### %s, %d samples per pixel\n\n", label(name).c_str(), total);
-        t += "| K | spp per buffer | mean | MoN M = K | MoN M = 4 | G-MoN best (t) | firefly | firefly, of it from "
-             "pixels hit in > K/2 buffers | firefly changed | "
-             "G-MoN changed | firefly highlights kept | G-MoN highlights kept | firefly ms (fastest seed) |\n"
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
-        for (int k : s.ks) t += detail_row(k, res.at({total, name, k}));
+        t += "| K | spp per buffer | method | relMSE | of it from pixels hit in > K/2 buffers | pixels changed | "
+             "highlights kept (unchanged) | highlights not lowered | ms (fastest seed) |\n"
+             "|---|---|---|---|---|---|---|---|---|\n";
+        for (int k : s.ks)
+            for (int m : {m_firefly, m_plain, m_gmon}) t += detail_row(k, res.at({total, name, k}), m);
     }
     return t;
 }
 
-// Time per frame per K and total: the median over the scenes of each scene's fastest seed.
+// Over the scenes: the median of each scene's fastest seed, with and without the return, and
+// the median of the per-scene differences.
+std::string timing_cells(const study& s, const results& res, int total, int k) {
+    std::vector<double> with, without, cost;
+    for (const std::string& name : s.scenes) {
+        const cell& c = res.at({total, name, k});
+        with.push_back(fastest(c, m_firefly));
+        without.push_back(fastest(c, m_plain));
+        cost.push_back(with.back() - without.back());
+    }
+    return fmt(" %.1f | %.1f | %+.1f (%+.0f%%) |", median(with), median(without), median(cost),
+               100.0 * median(cost) / median(without));
+}
+
 std::string timing(const study& s, const results& res) {
-    std::string t = "\n### firefly time per frame (ms, process() only; median over the scenes of the fastest seed)\n\n| K |";
-    for (int total : s.totals) t += fmt(" %d spp |", total);
+    std::string t = "\n### firefly time per frame (ms, process() only; median over the scenes of the fastest seed)\n\n"
+                    "The energy return's cost: the median over the scenes of (default - no return).\n\n| K |";
+    for (int total : s.totals) t += fmt(" %d spp: default | no energy return | return's cost |", total);
     t += "\n|---|";
-    for (std::size_t i = 0; i < s.totals.size(); ++i) t += "---|";
+    for (std::size_t i = 0; i < 3 * s.totals.size(); ++i) t += "---|";
     t += "\n";
     for (int k : s.ks) {
         t += fmt("| %d |", k);
-        for (int total : s.totals) {
-            std::vector<double> ms;
-            for (const std::string& name : s.scenes) ms.push_back(fastest(res.at({total, name, k})));
-            t += fmt(" %.1f |", median(ms));
-        }
+        for (int total : s.totals) t += timing_cells(s, res, total, k);
         t += "\n";
     }
     return t;
+}
+
+// Frames per K on which firefly with and without the energy return gave the same bits.
+std::string identical(const study& s, const results& res) {
+    std::string t = "\nFrames on which firefly with and without the energy return gave bit-identical buffers:";
+    for (int k : s.ks) {
+        int same = 0, n = 0;
+        for (const auto& [where, c] : res) {
+            if (std::get<2>(where) != k) continue;
+            for (const frame_result& r : c.seeds) {
+                same += r.plain_same;
+                ++n;
+            }
+        }
+        t += fmt("%s K = %d: %d of %d", k == s.ks.front() ? "" : ";", k, same, n);
+    }
+    return t + ".\n";
 }
 
 std::string memory(const study& s, const std::vector<memory_row>& rows) {
@@ -502,18 +638,19 @@ std::string memory(const study& s, const std::vector<memory_row>& rows) {
         "(a) the finished buffers handed to the detector; (b) sample_accumulator, whose float "
         "views are (a) with variance, so (b) includes (a); (c) the detector's heap: peak growth "
         "and bytes kept after the first frame of a fresh cross_buffer_detector, largest over the "
-        "scenes at %dx%d, %d spp, seed 1.\n\n"
+        "scenes at %dx%d, %d spp, seed 1, at the defaults and with return_energy = false.\n\n"
         "| K | (a) float colour | (a) + variance | (a) the detector needs at defaults | "
         "(b) accumulator, from its members | (b) accumulator bytes() | (c) detector peak | "
-        "(c) detector kept | K = 2: detector::scratch_bytes() | accumulator + detector peak | "
-        "same output with variance (K >= 4) |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "(c) detector kept | (c) peak, no energy return | (c) kept, no energy return | "
+        "K = 2: detector::scratch_bytes() | accumulator + detector peak | "
+        "same output with variance (K >= 4) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
         s.w, s.h, s.totals.front());
     for (const memory_row& m : rows) {
         const double colour = m.k * 3.0 * sizeof(float);
-        t += fmt("| %d | %.0f | %.0f | %.0f | %.0f | %.0f | %.1f | %.1f | %s | %.1f | %s |\n", m.k, colour, 2 * colour,
-                 default_variance(m.k) ? 2 * colour : colour, m.accumulator_formula, m.accumulator_bytes, m.peak,
-                 m.kept, m.k == 2 ? num(m.pair_scratch).c_str() : "-", m.accumulator_bytes + m.peak,
-                 m.k < 4 ? "-" : m.variance_neutral ? "yes" : "NO");
+        t += fmt("| %d | %.0f | %.0f | %.0f | %.0f | %.0f | %.1f | %.1f | %.1f | %.1f | %s | %.1f | %s |\n", m.k, colour,
+                 2 * colour, default_variance(m.k) ? 2 * colour : colour, m.accumulator_formula, m.accumulator_bytes,
+                 m.peak, m.kept, m.plain_peak, m.plain_kept, m.k == 2 ? num(m.pair_scratch).c_str() : "-",
+                 m.accumulator_bytes + m.peak, m.k < 4 ? "-" : m.variance_neutral ? "yes" : "NO");
     }
     return t;
 }
@@ -524,7 +661,10 @@ std::string preamble(const study& s, double seconds) {
         "Simulated %dx%d, seeds 1-%d, totals", s.w, s.h, s.seeds);
     for (int total : s.totals) t += fmt(" %d", total);
     t += fmt(" samples per pixel split over K buffers; relMSE averaged over the seeds; firefly on one thread "
-             "(serial executor), one detector per K kept over all frames; %s build; run took %.0f s.\n",
+             "(serial executor), one detector per K and option set kept over all frames; \"firefly\" is "
+             "cross_buffer_detector at its defaults (energy return on, sigma 8; it does not apply at K = 2, "
+             "the half-buffer detector), \"no energy return\" the same with return_energy = false; G-MoN at "
+             "its best threshold of 0.1, 0.25, 0.4; %s build; run took %.0f s.\n",
 #ifdef NDEBUG
              "NDEBUG",
 #else
@@ -546,12 +686,13 @@ int main(int argc, char** argv) {
     const auto t0 = std::chrono::steady_clock::now();
     results res;
     run_all(s, res);
-    const std::vector<memory_row> mem = measure_memory(s);
+    std::vector<memory_row> mem;
+    for (int k : s.ks) mem.push_back(measure_memory(s, k));
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     std::string md = preamble(s, seconds);
     for (int total : s.totals) md += headline(s, res, total);
-    md += timing(s, res);
-    md += memory(s, mem);
+    md += timing(s, res) + identical(s, res) + memory(s, mem);
+    for (int total : s.totals) md += mon_table(s, res, total);
     md += "\n### Per scene\n";
     for (int total : s.totals) md += details(s, res, total);
     std::fputs(md.c_str(), stdout);
