@@ -101,6 +101,8 @@ constexpr void for_each_option(F&& f) {
     f("rebuild", [](O& o) -> auto& { return o.rebuild; });
     f("blend_spatial", [](O& o) -> auto& { return o.blend_spatial; });
     f("reconstruct", [](O& o) -> auto& { return o.reconstruct; });
+    f("return_energy", [](O& o) -> auto& { return o.return_energy; });
+    f("energy_sigma", [](O& o) -> auto& { return o.energy_sigma; });
     f("local_test", [](O& o) -> auto& { return o.local_test; });
     f("local_false_alarm", [](O& o) -> auto& { return o.local.false_alarm; });
     f("local_radius", [](O& o) -> auto& { return o.local.radius; });
@@ -134,6 +136,8 @@ constexpr void for_each_half_field(F&& f) {
     f("phase2_iterations", &H::phase2_iterations);
     f("final_change", &H::final_change);
     f("reconstruction", &H::reconstruction);
+    f("energy_removed", &H::energy_removed);
+    f("energy_returned", &H::energy_returned);
 }
 
 // Every frame_report field but `half` (the two half reports, listed above): f(name, member

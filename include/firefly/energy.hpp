@@ -31,6 +31,7 @@
 #include <cstddef>
 #include <vector>
 
+#include "image_view.hpp"
 #include "parallel.hpp"
 
 namespace firefly {
@@ -107,8 +108,11 @@ inline void median3x3(const std::vector<double>& in, std::vector<double>& out, i
 // Frame-sized work arrays of the energy return, kept between frames.
 struct energy_scratch {
     std::vector<double> profile, m, l, v, tmp;
+    std::vector<double> excess, shape, returned;  // return_energy_to_image
     std::size_t bytes() const noexcept {
-        return (profile.capacity() + m.capacity() + l.capacity() + v.capacity() + tmp.capacity()) * sizeof(double);
+        return (profile.capacity() + m.capacity() + l.capacity() + v.capacity() + tmp.capacity() +
+                excess.capacity() + shape.capacity() + returned.capacity()) *
+               sizeof(double);
     }
 };
 
@@ -152,6 +156,57 @@ inline void energy_return(const std::vector<double>& excess, const std::vector<d
             returned[p * 3 + static_cast<std::size_t>(c)] = std::isfinite(add) && add > 0 ? add : 0.0;
         }
     }
+}
+
+// What one cleaned image gave and got back.
+struct energy_totals {
+    double removed = 0, returned = 0;  // sums over pixels of the mean colour channel
+};
+
+// The energy return on one cleaned image (the first three channels of `color`): pixel
+// rebuilt[e] held before[3 e .. 3 e + 2] before it was rebuilt. The return is added where it
+// exceeds the pixel's standard error, sqrt(variance_scale x the mean of its variance
+// channels), and never where keep[p] is false (black background, alpha 0).
+template <class C, class V>
+energy_totals return_energy_to_image(const image_view<C>& color, const image_view<V>& variance, double variance_scale,
+                                     const std::uint32_t* rebuilt, const float* before, std::size_t n,
+                                     const std::uint8_t* keep, double sigma, energy_scratch& s, const executor& exec) {
+    energy_totals t;
+    const int w = color.width(), h = color.height();
+    if (color.channels() < 3) return t;
+    const std::size_t np = color.pixel_count();
+    s.excess.assign(np * 3, 0.0);
+    for (std::size_t e = 0; e < n; ++e) {
+        const int x = static_cast<int>(rebuilt[e] % static_cast<std::uint32_t>(w));
+        const int y = static_cast<int>(rebuilt[e] / static_cast<std::uint32_t>(w));
+        for (int c = 0; c < 3; ++c) {
+            const double d = static_cast<double>(before[e * 3 + static_cast<std::size_t>(c)]) - color.load(x, y, c);
+            s.excess[static_cast<std::size_t>(rebuilt[e]) * 3 + static_cast<std::size_t>(c)] = std::isfinite(d) && d > 0 ? d : 0.0;
+        }
+    }
+    s.shape.resize(np * 3);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+            for (int c = 0; c < 3; ++c) {
+                const std::size_t i = (static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)) * 3 + static_cast<std::size_t>(c);
+                const double v = color.load(x, y, c) + s.excess[i];
+                s.shape[i] = std::isfinite(v) && v > 0 ? v : 0.0;
+            }
+    energy_return(s.excess, s.shape, w, h, sigma, s.returned, s, exec);
+    const int nv = variance.channels() == 1 ? 1 : 3;
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const std::size_t p = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+            const double* add = &s.returned[p * 3];
+            t.removed += (s.excess[p * 3] + s.excess[p * 3 + 1] + s.excess[p * 3 + 2]) / 3.0;
+            double var = 0;
+            for (int c = 0; c < nv; ++c) var += std::max(static_cast<double>(variance.load(x, y, c)), 0.0) / nv;
+            const double mean_add = (add[0] + add[1] + add[2]) / 3.0;
+            if (!keep[p] || !(mean_add > std::sqrt(variance_scale * var))) continue;
+            for (int c = 0; c < 3; ++c) color.store(x, y, c, color.load(x, y, c) + add[c]);
+            t.returned += mean_add;
+        }
+    return t;
 }
 
 }  // namespace firefly

@@ -31,6 +31,7 @@
 
 #include "bound.hpp"
 #include "cross_half.hpp"
+#include "energy.hpp"
 #include "esd.hpp"
 #include "highlight.hpp"
 #include "image_view.hpp"
@@ -79,6 +80,10 @@ struct detector_options {
     bool blend_spatial = true;          // other_half: blend in the spatial estimate (false:
                                         // the other half's value alone)
     bool reconstruct = true;            // false: detect and report only, change nothing
+    bool return_energy = false;         // give back the rebuilt fireflies' energy where many
+                                        // agree on it (energy.hpp; changes pixels near
+                                        // dense fireflies, never lowers any)
+    double energy_sigma = 8.0;          // its Gaussian's width in pixels (1 to 64)
 };
 
 inline status check_options(const detector_options& o) noexcept {
@@ -96,6 +101,8 @@ inline status check_options(const detector_options& o) noexcept {
         return status{errc::invalid_argument,
                       "highlight: max_ratio >= 1, max_relative_error >= 0, min_excess_z >= 0"};
     if (status st = check_local_test_options(o.local); !st.ok()) return st;
+    if (!(o.energy_sigma >= 1.0 && o.energy_sigma <= 64.0))
+        return status{errc::invalid_argument, "energy_sigma must lie in [1, 64]"};
     return check_reconstruct_options(o.reconstruction);
 }
 
@@ -132,6 +139,8 @@ struct half_report {
     int phase2_iterations = 0;
     double final_change = 0.0;
     status reconstruction{};            // no_valid_pixels when pixels were left unreachable
+    double energy_removed = 0.0;        // return_energy: sums over pixels of the mean colour
+    double energy_returned = 0.0;       // the rebuild took away, and the energy return added
 };
 
 struct [[nodiscard]] frame_report {
@@ -193,7 +202,8 @@ public:
                  h.removed.capacity() * sizeof(double) + h.keys.capacity() * sizeof(std::uint64_t) +
                  (h.fix.capacity() + h.cross.capacity()) * sizeof(std::uint32_t) +
                  h.cross_values.capacity() * sizeof(double) + h.decision.capacity() +
-                 h.band_counts.capacity() * sizeof(stddev_counts) + h.recon.bytes();
+                 h.band_counts.capacity() * sizeof(stddev_counts) + h.before.capacity() * sizeof(float) +
+                 h.energy.bytes() + h.recon.bytes();
         return n;
     }
 
@@ -242,6 +252,8 @@ private:
         std::vector<double> cross_values;    // their new values, entry x channel
         std::vector<std::uint8_t> decision;  // per entry of a list: its outcome (chunked stages)
         std::vector<stddev_counts> band_counts;  // the standard-deviation pass per row band
+        std::vector<float> before;           // return_energy: colour of the pixels to rebuild
+        energy_scratch energy;
         reconstruct_scratch recon;
     };
 
@@ -291,7 +303,11 @@ private:
         if (cross)
             for (int h = 0; h < 2; ++h) stage_cross_half(*hb[h], *hb[1 - h], halves_[h], halves_[1 - h], rep);
         clock.lap(frame_report::other_half);
+        const bool energy = clean && options_.return_energy;
+        if (energy) exec_.run(2, [&](std::size_t h) { keep_before(*hb[h], halves_[h]); });
         exec_.run(2, [&](std::size_t h) { finish(*hb[h], halves_[h], *masks[h], rep.half[h], clean, cross); });
+        if (energy)
+            for (int h = 0; h < 2; ++h) give_energy_back(*hb[h], halves_[h], rep.half[h], rep.variance_calibration);
         clock.lap(frame_report::rebuild);
         for (const half_report& hr : rep.half)
             if (!hr.reconstruction.ok()) rep.error = hr.reconstruction;
@@ -723,6 +739,35 @@ private:
             s.cross.push_back(s.fix[e]);
         }
         s.cross_values.resize(s.cross.size() * stride);
+    }
+
+    // return_energy: the colour of every pixel to rebuild, before the rebuild.
+    template <class C, class V, class A>
+    void keep_before(const half_buffer<C, V, A>& hb, half_state& s) {
+        const int w = hb.color.width(), nc = std::min(hb.color.channels(), 3);
+        s.before.assign(s.fix.size() * 3, 0.0f);
+        for (std::size_t e = 0; e < s.fix.size(); ++e)
+            for (int c = 0; c < nc; ++c)
+                s.before[e * 3 + static_cast<std::size_t>(c)] = static_cast<float>(
+                    hb.color.load(static_cast<int>(s.fix[e] % static_cast<std::uint32_t>(w)),
+                                  static_cast<int>(s.fix[e] / static_cast<std::uint32_t>(w)), c));
+    }
+
+    // return_energy: energy.hpp on the cleaned half; never onto ignored (black, alpha 0) or
+    // non-finite pixels.
+    template <class C, class V, class A>
+    void give_energy_back(const half_buffer<C, V, A>& hb, half_state& s, half_report& r, double calibration) {
+        if constexpr (!std::is_const_v<C>) {
+            s.decision.resize(s.label.size());
+            for (std::size_t i = 0; i < s.label.size(); ++i) s.decision[i] = cls(s.label[i]) == valid_class;
+            const energy_totals t = return_energy_to_image(hb.color, hb.variance, calibration, s.fix.data(),
+                                                           s.before.data(), s.fix.size(), s.decision.data(),
+                                                           options_.energy_sigma, s.energy, exec_);
+            r.energy_removed = t.removed;
+            r.energy_returned = t.returned;
+        } else {
+            (void)hb, (void)s, (void)r, (void)calibration;
+        }
     }
 
     template <class C, class V, class A>
