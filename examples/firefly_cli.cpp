@@ -18,7 +18,11 @@
 // frame, records it in the report and exits 1 at the end.
 #include <firefly/firefly.hpp>
 
+#include <atomic>
 #include <chrono>
+#include <functional>
+#include <future>
+#include <thread>
 #include <cmath>
 #include <cstdio>
 #include <map>
@@ -522,9 +526,42 @@ std::string clean_frame(const options& c, cross_buffer_detector& xd, const frame
     return {};
 }
 
-// One frame: read, check, clean, write to temporaries. fr.error is empty on success.
-void run_frame(const options& c, cross_buffer_detector& xd, long long frame, frame_result& fr) {
-    const frame_files f = files_of(c, frame);
+// A frame's inputs, read and checked. The files of a frame are read in parallel, and the
+// next frame while this one is cleaned, when --threads allows (errors in file order either way).
+struct frame_input {
+    frame_files files;
+    std::vector<buffer_data> h;
+    std::string error;
+    double read_ms = 0;
+};
+
+frame_input read_frame(const options& c, long long frame) {
+    frame_input in{files_of(c, frame), {}, {}, 0};
+    const auto t0 = clock_type::now();
+    const std::size_t n = in.files.in.size();
+    in.h.resize(n);
+    std::vector<std::string> errors(n);
+    std::atomic<std::size_t> next{0};
+    auto worker = [&] {
+        for (std::size_t i; (i = next.fetch_add(1)) < n;) errors[i] = read_buffer(c, in.files.in[i], in.files.var[i], in.h[i]);
+    };
+    std::vector<std::thread> pool;
+    for (unsigned t = 1; t < std::min<std::size_t>(c.threads, n); ++t) pool.emplace_back(worker);
+    worker();
+    for (std::thread& t : pool) t.join();
+    for (const std::string& e : errors)
+        if (!e.empty()) {
+            in.error = e;
+            break;
+        }
+    if (in.error.empty()) in.error = check_buffers(c, in.files, in.h);
+    in.read_ms = ms_since(t0);
+    return in;
+}
+
+// One frame, read: clean, write to temporaries. fr.error is empty on success.
+void run_frame(const options& c, cross_buffer_detector& xd, long long frame, frame_input& in, frame_result& fr) {
+    const frame_files& f = in.files;
     fr.record = json{{"frame", frame}};
     if (c.mode == input_mode::halves) {
         fr.record["half_a"] = f.in[0];
@@ -533,12 +570,9 @@ void run_frame(const options& c, cross_buffer_detector& xd, long long frame, fra
         fr.record["inputs"] = f.in;
     }
     fr.record["output"] = f.out;
-    const auto t0 = clock_type::now();
-    std::vector<buffer_data> h(f.in.size());
-    for (std::size_t i = 0; i < h.size() && fr.error.empty(); ++i) fr.error = read_buffer(c, f.in[i], f.var[i], h[i]);
-    if (fr.error.empty()) fr.error = check_buffers(c, f, h);
-    fr.record["milliseconds"]["read"] = ms_since(t0);
-    if (fr.error.empty()) fr.error = clean_frame(c, xd, f, h, fr);
+    fr.error = in.error;
+    fr.record["milliseconds"]["read"] = in.read_ms;
+    if (fr.error.empty()) fr.error = clean_frame(c, xd, f, in.h, fr);
     if (!fr.error.empty()) fr.outputs.discard();
 }
 
@@ -613,9 +647,15 @@ int run(const options& c) {
     const long long first = c.sequence ? c.first : 0, last = c.sequence ? c.last : 0;
     const long long count = (last - first) / c.step + 1;
     long long index = 0;
+    firefly_tools::set_exr_threads(c.threads);
+    // With threads, the next frame is read while this one is cleaned and written.
+    const auto policy = c.threads > 1 ? std::launch::async : std::launch::deferred;
+    std::future<frame_input> ahead = std::async(policy, read_frame, std::cref(c), first);
     for (long long f = first; f <= last; f += c.step, ++index) {
+        frame_input in = ahead.get();
+        if (f <= last - c.step) ahead = std::async(policy, read_frame, std::cref(c), f + c.step);
         frame_result fr;
-        run_frame(c, xd, f, fr);
+        run_frame(c, xd, f, in, fr);
         if (fr.error.empty() && c.sequence) fr.error = fr.outputs.commit();
         if (!fr.error.empty()) {
             ++failed;

@@ -29,6 +29,7 @@
 #include <OpenEXR/ImfInputFile.h>
 #include <OpenEXR/ImfOutputFile.h>
 #include <OpenEXR/ImfStdIO.h>
+#include <OpenEXR/ImfThreading.h>
 #endif
 #ifdef FIREFLY_HAVE_PNG
 #include <png.h>
@@ -59,6 +60,16 @@ inline bool have_exr() {
     return false;
 #endif
 }
+// OpenEXR's own thread pool (decompression of the lines of a file, compression on write):
+// n threads, or none for n <= 1.
+inline void set_exr_threads(unsigned n) {
+#ifdef FIREFLY_HAVE_OPENEXR
+    Imf::setGlobalThreadCount(n > 1 ? static_cast<int>(n) : 0);
+#else
+    (void)n;
+#endif
+}
+
 inline bool have_png() {
 #ifdef FIREFLY_HAVE_PNG
     return true;

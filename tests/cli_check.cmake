@@ -610,6 +610,11 @@ endforeach()
 expect_ok(renders_sequence --renders ${SEQ} --frames 1-2 -o "${WORK}/sr.####.exr" --report ${WORK}/sr.json -q)
 same_bits(renders_sequence_1 ${WORK}/sr.0001.exr ${WORK}/t4.exr)
 same_bits(renders_sequence_2 ${WORK}/sr.0002.exr ${WORK}/t4.exr)
+# with threads: the frame's files read in parallel, the next frame read ahead, OpenEXR's pool;
+# the same bits
+expect_ok(renders_sequence_threads --renders ${SEQ} --frames 1-2 -o "${WORK}/srt.####.exr" --threads 3 -q)
+same_bits(renders_sequence_threads_1 ${WORK}/srt.0001.exr ${WORK}/sr.0001.exr)
+same_bits(renders_sequence_threads_2 ${WORK}/srt.0002.exr ${WORK}/sr.0002.exr)
 json_get(ff1 ${WORK}/sr.json frames 0 fireflies)
 json_get(ff2 ${WORK}/sr.json frames 1 fireflies)
 math(EXPR ff_want "${ff2} + 1")
