@@ -51,41 +51,82 @@ inline std::vector<double> gaussian_weights(double sigma, int r = 0) {
     return w;
 }
 
-// One separable pass over nch interleaved channels: along x (step = nch) or along y (step =
-// w * nch). Outside the frame counts as 0. Rows (or columns) as tasks on the executor.
-inline void blur_pass(const double* in, double* out, int w, int h, int nch, const std::vector<double>& k,
-                      bool along_x, const executor& exec) {
+// The pass along x: each row copied into a zero-padded line (outside the frame counts as 0),
+// then k0 v[j] + sum over d of k_d (v[j - d] + v[j + d]) for every channel of the row at once
+// (d outermost: the inner loop is contiguous and vectorises). Rows as tasks on the executor.
+inline void blur_cols(const double* in, double* out, int w, int h, int nch, const std::vector<double>& k,
+                      const executor& exec) {
     const int r = static_cast<int>(k.size()) - 1;
-    const int n = along_x ? w : h, lines = along_x ? h : w;
-    const std::ptrdiff_t step = along_x ? nch : static_cast<std::ptrdiff_t>(w) * nch;
-    const std::ptrdiff_t line_step = along_x ? static_cast<std::ptrdiff_t>(w) * nch : nch;
-    exec.run(static_cast<std::size_t>(lines), [&](std::size_t line) {
-        const double* src = in + static_cast<std::ptrdiff_t>(line) * line_step;
-        double* dst = out + static_cast<std::ptrdiff_t>(line) * line_step;
-        for (int i = 0; i < n; ++i)
-            for (int c = 0; c < nch; ++c) {
-                double s = k[0] * src[i * step + c];
-                for (int d = 1; d <= r; ++d) {
-                    const double lo = i - d >= 0 ? src[(i - d) * step + c] : 0.0;
-                    const double hi = i + d < n ? src[(i + d) * step + c] : 0.0;
-                    s += k[static_cast<std::size_t>(d)] * (lo + hi);
-                }
-                dst[i * step + c] = s;
-            }
+    const std::size_t row = static_cast<std::size_t>(w) * static_cast<std::size_t>(nch);
+    const std::size_t margin = static_cast<std::size_t>(r) * static_cast<std::size_t>(nch);
+    exec.run(static_cast<std::size_t>(h), [&](std::size_t y) {
+        const double* src = in + y * row;
+        double* dst = out + y * row;
+        std::vector<double> pad(row + 2 * margin, 0.0);
+        std::copy(src, src + row, pad.begin() + static_cast<std::ptrdiff_t>(margin));
+        const double* p = pad.data() + margin;
+        for (std::size_t j = 0; j < row; ++j) dst[j] = k[0] * p[j];
+        for (int d = 1; d <= r; ++d) {
+            const std::size_t off = static_cast<std::size_t>(d) * static_cast<std::size_t>(nch);
+            const double kd = k[static_cast<std::size_t>(d)];
+            for (std::size_t j = 0; j < row; ++j) dst[j] += kd * (p[j - off] + p[j + off]);
+        }
     });
 }
 
-// Separable Gaussian blur of nch interleaved channels in place (tmp: scratch of the same size).
+// The pass along y, a whole row at a time (contiguous: it vectorises, where a column's
+// stride would not); the same sums in the same order as along x.
+inline void blur_rows(const double* in, double* out, int w, int h, int nch, const std::vector<double>& k,
+                      const executor& exec) {
+    const int r = static_cast<int>(k.size()) - 1;
+    const std::size_t row = static_cast<std::size_t>(w) * static_cast<std::size_t>(nch);
+    exec.run(static_cast<std::size_t>(h), [&](std::size_t yy) {
+        const int y = static_cast<int>(yy);
+        double* dst = out + yy * row;
+        const double* mid = in + yy * row;
+        for (std::size_t i = 0; i < row; ++i) dst[i] = k[0] * mid[i];
+        for (int d = 1; d <= r; ++d) {
+            const double* lo = y - d >= 0 ? in + static_cast<std::size_t>(y - d) * row : nullptr;
+            const double* hi = y + d < h ? in + static_cast<std::size_t>(y + d) * row : nullptr;
+            const double kd = k[static_cast<std::size_t>(d)];
+            if (lo && hi)
+                for (std::size_t i = 0; i < row; ++i) dst[i] += kd * (lo[i] + hi[i]);
+            else if (lo || hi) {
+                const double* p = lo ? lo : hi;
+                for (std::size_t i = 0; i < row; ++i) dst[i] += kd * (p[i] + 0.0);
+            }
+        }
+    });
+}
+
 inline void gaussian_blur(std::vector<double>& v, std::vector<double>& tmp, int w, int h, int nch,
                           const std::vector<double>& k, const executor& exec) {
     tmp.resize(v.size());
-    blur_pass(v.data(), tmp.data(), w, h, nch, k, true, exec);
-    blur_pass(tmp.data(), v.data(), w, h, nch, k, false, exec);
+    blur_cols(v.data(), tmp.data(), w, h, nch, k, exec);
+    blur_rows(tmp.data(), v.data(), w, h, nch, k, exec);
 }
 
-// 3x3 median of each of 3 interleaved channels (the frame's edge: the pixels inside it).
+// Median of 9 values by the 19-exchange network (Paeth): p[4] ends as the median.
+inline double median9(double* p) noexcept {
+    auto sort2 = [](double& a, double& b) {
+        const double lo = std::min(a, b), hi = std::max(a, b);
+        a = lo;
+        b = hi;
+    };
+    sort2(p[1], p[2]), sort2(p[4], p[5]), sort2(p[7], p[8]), sort2(p[0], p[1]), sort2(p[3], p[4]);
+    sort2(p[6], p[7]), sort2(p[1], p[2]), sort2(p[4], p[5]), sort2(p[7], p[8]), sort2(p[0], p[3]);
+    sort2(p[5], p[8]), sort2(p[4], p[7]), sort2(p[3], p[6]), sort2(p[1], p[4]), sort2(p[2], p[5]);
+    sort2(p[4], p[7]), sort2(p[4], p[2]), sort2(p[6], p[4]), sort2(p[4], p[2]);
+    return p[4];
+}
+
+// 3x3 median of each of 3 interleaved channels (the frame's edge: the pixels inside it, the
+// mean of the middle two where they are even in number). Values are finite.
 inline void median3x3(const std::vector<double>& in, std::vector<double>& out, int w, int h, const executor& exec) {
     out.resize(in.size());
+    auto at = [w](int x, int y, int c) {
+        return (static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)) * 3 + static_cast<std::size_t>(c);
+    };
     exec.run(static_cast<std::size_t>(h), [&](std::size_t row) {
         const int y = static_cast<int>(row);
         for (int x = 0; x < w; ++x)
@@ -93,12 +134,15 @@ inline void median3x3(const std::vector<double>& in, std::vector<double>& out, i
                 double t[9] = {};
                 int n = 0;
                 for (int yy = std::max(0, y - 1); yy <= std::min(h - 1, y + 1); ++yy)
-                    for (int xx = std::max(0, x - 1); xx <= std::min(w - 1, x + 1); ++xx)
-                        t[n++] = in[(static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(xx)) * 3 + static_cast<std::size_t>(c)];
+                    for (int xx = std::max(0, x - 1); xx <= std::min(w - 1, x + 1); ++xx) t[n++] = in[at(xx, yy, c)];
+                if (n == 9) {
+                    out[at(x, y, c)] = median9(t);
+                    continue;
+                }
                 std::nth_element(t, t + n / 2, t + n);
                 double m = t[n / 2];
                 if (n % 2 == 0) m = 0.5 * (m + *std::max_element(t, t + n / 2));  // mean of the middle two
-                out[(static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)) * 3 + static_cast<std::size_t>(c)] = m;
+                out[at(x, y, c)] = m;
             }
     });
 }
