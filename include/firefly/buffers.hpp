@@ -35,18 +35,14 @@
 // spread alone 0.19% (its caustic fireflies included).
 // Measured, relMSE against the reference (../shared/data/cycles-caustics-seeds, 8 Cycles
 // renders of 16 samples, no variance; 128 samples in all): mean 0.496; K = 4 (2 renders per
-// buffer): median of means 0.0326, G-MoN (best threshold) 0.0321, this 0.0249; K = 8: median of
-// means 0.0242, G-MoN 0.0229, this 0.0234. The tiny renderer example (K = 8, 64 samples):
-// mean 0.0266, this 0.0088, two halves through firefly::detector 0.0090. The simulator
-// (256x192, seed 7; median of means / G-MoN at its best threshold / this): caustics K = 4
-// 0.160 / 0.159 / 0.099, K = 8 0.097 / 0.096 / 0.098; dense10 K = 4 0.448 / 0.436 / 0.302,
-// K = 8 0.229 / 0.229 / 0.255; interior K = 4 0.083 / 0.071 / 0.071, K = 8 0.063 / 0.042 /
-// 0.044; a frame without fireflies: the mean's 0.0038 / 0.0037 kept (G-MoN too, the median of
-// means 0.0045 / 0.0051). q = 1e-3 gains a little where fireflies are dense (dense10 K = 8
-// 0.243, interior K = 4 0.059), nothing on the renders. Highlights: on the simulator's
-// highlight pixels, those changed without a firefly in the changed buffer: caustics 6 of 182
-// (K = 4) and 4 of 182 (K = 8); interior 29 / 121 of 6302 (a firefly on a highlight is
-// rebuilt, rightly; the sim's highlight_kept counts those too: 0.945-0.956 and 0.92-0.94).
+// buffer): median of means 0.0326, G-MoN (best threshold) 0.0321, this 0.0199 (0.0249 without
+// the energy return); K = 8: median of means 0.0242, G-MoN 0.0230, this 0.0182 (0.0234). The
+// simulator, 1024x540 (docs/accuracy.md), this / G-MoN at its best: caustics K = 4 0.034 /
+// 0.133, K = 8 0.029 / 0.086; interior K = 4 0.034 / 0.061, K = 8 0.016 / 0.042; a frame
+// without fireflies 0.00093628 / 0.00093582 at K = 4 (its false alarms, q, rebuilt). How the
+// result grows with K and what each K costs: docs/k_study.md.
+// Highlights: a firefly on a highlight is rebuilt, rightly, which the simulator's
+// highlight_kept counts as a highlight lost (caustics 0.95, interior 0.92-0.94 kept, not lowered).
 // Not promised: heavy-tailed (lognormal) per-sample laws, as local_test.hpp: the interior
 // scene changes 0.1-0.26% of its clean pixel-buffers at q = 1e-4.
 //
@@ -58,7 +54,9 @@
 //       most floor(K / 2)) is rebuilt from the others.
 //   "rebuilt from the other half at the same pixel"   -> from the mean of the clean buffers
 //       at that pixel (colour and every channel; variance: the mean of their variances, what
-//       a clean buffer holds), so the mean of the K buffers equals the mean of the clean ones.
+//       a clean buffer holds), so the mean of the K buffers equals the mean of the clean ones;
+//       then (return_energy, K >= 3) the removed energy is given back where many fireflies
+//       agree on it, the same amount to every buffer (energy.hpp).
 //   "NaN/Inf in a half are repaired"                   -> a buffer with NaN/Inf in colour or
 //       variance at a pixel is left out of the test and rebuilt like a firefly.
 //   "bad in both halves: spatial reconstruction"       -> a pixel with more than floor(K / 2)
