@@ -26,6 +26,7 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <memory>
 #include <new>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -502,30 +503,6 @@ struct frame_result {
     std::string error;
 };
 
-// Cleans a frame read into h and writes its outputs to temporaries.
-std::string clean_frame(const options& c, cross_buffer_detector& xd, const frame_files& f, std::vector<buffer_data>& h,
-                        frame_result& fr) {
-    const image& first = h[0].img;
-    const std::size_t np = static_cast<std::size_t>(first.width) * static_cast<std::size_t>(first.height);
-    mask_list masks(c.masks.empty() ? 0 : h.size(), std::vector<std::uint8_t>(c.masks.empty() ? 0 : np, 0));
-    image before;  // the mean of the inputs, for the preview
-    if (!c.preview.empty()) before = combine(c, h);
-    fr.record["width"] = first.width;
-    fr.record["height"] = first.height;
-    std::string line;
-    const auto t1 = clock_type::now();
-    std::string e = h.size() == 2 ? clean_pair(xd.pair_detector(), h, masks, fr.record, line)
-                                  : clean_cross(c, xd, h, masks, fr.record, line);
-    const double process_ms = ms_since(t1);
-    if (!e.empty()) return e;
-    const auto t2 = clock_type::now();
-    if (e = write_outputs(c, f, h, masks, before, fr.outputs); !e.empty()) return e;
-    fr.record["milliseconds"] = json{{"read", fr.record["milliseconds"]["read"]}, {"process", process_ms}, {"write", ms_since(t2)}};
-    if (!c.quiet)
-        std::printf("%s: %dx%d, %s, %.1f ms\n", f.out.c_str(), first.width, first.height, line.c_str(), process_ms);
-    return {};
-}
-
 // A frame's inputs, read and checked. The files of a frame are read in parallel, and the
 // next frame while this one is cleaned, when --threads allows (errors in file order either way).
 struct frame_input {
@@ -559,21 +536,64 @@ frame_input read_frame(const options& c, long long frame) {
     return in;
 }
 
-// One frame, read: clean, write to temporaries. fr.error is empty on success.
-void run_frame(const options& c, cross_buffer_detector& xd, long long frame, frame_input& in, frame_result& fr) {
-    const frame_files& f = in.files;
-    fr.record = json{{"frame", frame}};
+// A frame between its steps: read, cleaned, written to temporaries (with threads, in the
+// background while the next frame is cleaned), then committed in frame order.
+struct frame_job {
+    long long frame = 0, index = 0;
+    frame_input in;
+    mask_list masks;
+    image before;  // the mean of the inputs, for the preview
+    frame_result fr;
+    std::string line;
+    double process_ms = 0;
+};
+
+// Cleans the frame read into j.in: the buffers in place, the masks, the record.
+std::string clean_frame(const options& c, cross_buffer_detector& xd, frame_job& j) {
+    std::vector<buffer_data>& h = j.in.h;
+    const image& first = h[0].img;
+    const std::size_t np = static_cast<std::size_t>(first.width) * static_cast<std::size_t>(first.height);
+    j.masks.assign(c.masks.empty() ? 0 : h.size(), std::vector<std::uint8_t>(c.masks.empty() ? 0 : np, 0));
+    if (!c.preview.empty()) j.before = combine(c, h);
+    j.fr.record["width"] = first.width;
+    j.fr.record["height"] = first.height;
+    const auto t1 = clock_type::now();
+    std::string e = h.size() == 2 ? clean_pair(xd.pair_detector(), h, j.masks, j.fr.record, j.line)
+                                  : clean_cross(c, xd, h, j.masks, j.fr.record, j.line);
+    j.process_ms = ms_since(t1);
+    return e;
+}
+
+// One frame, read: clean. fr.error is empty on success.
+void run_frame(const options& c, cross_buffer_detector& xd, frame_job& j) {
+    const frame_files& f = j.in.files;
+    json& rec = j.fr.record;
+    rec = json{{"frame", j.frame}};
     if (c.mode == input_mode::halves) {
-        fr.record["half_a"] = f.in[0];
-        fr.record["half_b"] = f.in[1];
+        rec["half_a"] = f.in[0];
+        rec["half_b"] = f.in[1];
     } else {
-        fr.record["inputs"] = f.in;
+        rec["inputs"] = f.in;
     }
-    fr.record["output"] = f.out;
-    fr.error = in.error;
-    fr.record["milliseconds"]["read"] = in.read_ms;
-    if (fr.error.empty()) fr.error = clean_frame(c, xd, f, in.h, fr);
-    if (!fr.error.empty()) fr.outputs.discard();
+    rec["output"] = f.out;
+    j.fr.error = j.in.error;
+    rec["milliseconds"]["read"] = j.in.read_ms;
+    if (j.fr.error.empty()) j.fr.error = clean_frame(c, xd, j);
+}
+
+// Writes a cleaned frame's outputs to temporaries (nothing for a failed frame).
+void write_frame(const options& c, frame_job& j) {
+    if (j.fr.error.empty()) {
+        const auto t2 = clock_type::now();
+        j.fr.error = write_outputs(c, j.in.files, j.in.h, j.masks, j.before, j.fr.outputs);
+        j.fr.record["milliseconds"] = json{
+            {"read", j.in.read_ms}, {"process", j.process_ms}, {"write", ms_since(t2)}};
+        const image& first = j.in.h[0].img;
+        if (j.fr.error.empty() && !c.quiet)
+            std::printf("%s: %dx%d, %s, %.1f ms\n", j.in.files.out.c_str(), first.width, first.height, j.line.c_str(),
+                        j.process_ms);
+    }
+    if (!j.fr.error.empty()) j.fr.outputs.discard();
 }
 
 // The options of the detector that ran: firefly::detector's for two buffers, the K-buffer
@@ -648,23 +668,43 @@ int run(const options& c) {
     const long long count = (last - first) / c.step + 1;
     long long index = 0;
     firefly_tools::set_exr_threads(c.threads);
-    // With threads, the next frame is read while this one is cleaned and written.
+    // With threads, the next frame is read while this one is cleaned, and the previous one is
+    // written meanwhile.
     const auto policy = c.threads > 1 ? std::launch::async : std::launch::deferred;
     std::future<frame_input> ahead = std::async(policy, read_frame, std::cref(c), first);
-    for (long long f = first; f <= last; f += c.step, ++index) {
-        frame_input in = ahead.get();
-        if (f <= last - c.step) ahead = std::async(policy, read_frame, std::cref(c), f + c.step);
-        frame_result fr;
-        run_frame(c, xd, f, in, fr);
+    // A written frame is committed (or its error recorded) in frame order.
+    auto settle = [&](frame_job& j) {
+        frame_result& fr = j.fr;
         if (fr.error.empty() && c.sequence) fr.error = fr.outputs.commit();
         if (!fr.error.empty()) {
             ++failed;
             fr.record["error"] = fr.error;
-            complain(c, f, fr.error);
+            complain(c, j.frame, fr.error);
         }
         frames.push_back(fr.record);
         if (!c.sequence) pending = std::move(fr.outputs);
-        if (c.sequence && !c.quiet) std::printf("  [%lld/%lld]%s\n", index + 1, count, fr.error.empty() ? "" : " failed");
+        if (c.sequence && !c.quiet) std::printf("  [%lld/%lld]%s\n", j.index + 1, count, fr.error.empty() ? "" : " failed");
+    };
+    std::unique_ptr<frame_job> previous;
+    std::future<void> writing;  // the previous frame's outputs
+    for (long long f = first; f <= last; f += c.step, ++index) {
+        auto job = std::make_unique<frame_job>();
+        job->frame = f;
+        job->index = index;
+        job->in = ahead.get();
+        if (f <= last - c.step) ahead = std::async(policy, read_frame, std::cref(c), f + c.step);
+        run_frame(c, xd, *job);
+        if (writing.valid()) {
+            writing.get();
+            settle(*previous);
+        }
+        frame_job* j = job.get();
+        writing = std::async(policy, [&c, j] { write_frame(c, *j); });
+        previous = std::move(job);
+    }
+    if (writing.valid()) {
+        writing.get();
+        settle(*previous);
     }
     std::string e;
     if (!c.report.empty()) {
