@@ -582,7 +582,7 @@ private:
         exec_.run(static_cast<std::size_t>(h), [&](std::size_t row) {
             const int y = static_cast<int>(row);
             for (int x = 0; x < w; ++x) {
-                double level[max_k_levels] = {};
+                double level[detail::max_buffers] = {};
                 for (int c = 0; c < 3; ++c) {
                     double sum = 0;
                     for (int i = 0; i < k; ++i) {
@@ -633,7 +633,6 @@ private:
     std::vector<double> noise_;  // per pixel: its own relative variance of y (NaN: unknown)
     std::vector<double> excess_, mean_, profile_, returned_;  // energy return: 3 channels per pixel
     std::vector<double> error_;                     // standard error of each pixel's mean level
-    static constexpr int max_k_levels = detail::max_buffers;
 
     // The standard error of the mean of k levels (their spread / sqrt(k)); k >= 3 here.
     static double standard_error(const double* level, int k) noexcept {
