@@ -261,7 +261,7 @@ public:
     detector& pair_detector() noexcept { return pair_; }
     // Work memory kept between frames, bytes (the K = 2 detector's included).
     std::size_t scratch_bytes() const noexcept {
-        return (noise_.capacity() + excess_.capacity() + mean_.capacity() + profile_.capacity() + returned_.capacity() +
+        return (noise_.capacity() + excess_.capacity() + profile_.capacity() + returned_.capacity() +
                 error_.capacity()) *
                    sizeof(double) +
                energy_.bytes() + pair_.scratch_bytes();
@@ -577,7 +577,11 @@ private:
     template <class C, class V>
     void return_energy(const buffer_view<C, V>* b, int k, cross_buffer_report& rep) {
         const int w = b[0].color.width(), h = b[0].color.height();
-        mean_.assign(excess_.size(), 0.0);
+        // The shape: the input's mean (the clean mean plus what was removed), whose 3x3
+        // median keeps where fireflies fall densely (a caustic lit mostly by them) and drops
+        // the lone ones; the clean mean alone misplaces that light at high K (few samples a
+        // buffer: most of a caustic's light is then flagged).
+        profile_.assign(excess_.size(), 0.0);
         error_.assign(excess_.size() / 3, 0.0);
         exec_.run(static_cast<std::size_t>(h), [&](std::size_t row) {
             const int y = static_cast<int>(row);
@@ -591,17 +595,12 @@ private:
                         level[i] += v / 3.0;
                     }
                     const double m = sum / k;
-                    mean_[index(x, y, w) * 3 + static_cast<std::size_t>(c)] = std::isfinite(m) && m > 0 ? m : 0.0;
+                    const std::size_t i = index(x, y, w) * 3 + static_cast<std::size_t>(c);
+                    profile_[i] = (std::isfinite(m) && m > 0 ? m : 0.0) + excess_[i];
                 }
                 error_[index(x, y, w)] = standard_error(level, k);
             }
         });
-        // the profile: the input's mean (the clean mean plus what was removed), whose 3x3
-        // median keeps where fireflies fall densely (a caustic lit mostly by them) and drops
-        // the lone ones; the clean mean alone misplaces that light at high K (few samples
-        // a buffer: most of a caustic's light is then flagged)
-        profile_.resize(mean_.size());
-        for (std::size_t i = 0; i < mean_.size(); ++i) profile_[i] = mean_[i] + excess_[i];
         energy_return(excess_, profile_, w, h, options_.energy_sigma, returned_, energy_, exec_);
         if constexpr (!std::is_const_v<C>)
             exec_.run(static_cast<std::size_t>(h), [&](std::size_t row) {
@@ -631,7 +630,7 @@ private:
     detector pair_;
     detail::cross_thresholds thresholds_{};
     std::vector<double> noise_;  // per pixel: its own relative variance of y (NaN: unknown)
-    std::vector<double> excess_, mean_, profile_, returned_;  // energy return: 3 channels per pixel
+    std::vector<double> excess_, profile_, returned_;  // energy return: 3 channels per pixel
     std::vector<double> error_;                     // standard error of each pixel's mean level
 
     // The standard error of the mean of k levels (their spread / sqrt(k)); k >= 3 here.

@@ -54,7 +54,7 @@ inline std::vector<double> gaussian_weights(double sigma, int r = 0) {
 // The pass along x: each row copied into a zero-padded line (outside the frame counts as 0),
 // then k0 v[j] + sum over d of k_d (v[j - d] + v[j + d]) for every channel of the row at once
 // (d outermost: the inner loop is contiguous and vectorises). Rows as tasks on the executor.
-inline void blur_cols(const double* in, double* out, int w, int h, int nch, const std::vector<double>& k,
+inline void blur_along_x(const double* in, double* out, int w, int h, int nch, const std::vector<double>& k,
                       const executor& exec) {
     const int r = static_cast<int>(k.size()) - 1;
     const std::size_t row = static_cast<std::size_t>(w) * static_cast<std::size_t>(nch);
@@ -76,7 +76,7 @@ inline void blur_cols(const double* in, double* out, int w, int h, int nch, cons
 
 // The pass along y, a whole row at a time (contiguous: it vectorises, where a column's
 // stride would not); the same sums in the same order as along x.
-inline void blur_rows(const double* in, double* out, int w, int h, int nch, const std::vector<double>& k,
+inline void blur_along_y(const double* in, double* out, int w, int h, int nch, const std::vector<double>& k,
                       const executor& exec) {
     const int r = static_cast<int>(k.size()) - 1;
     const std::size_t row = static_cast<std::size_t>(w) * static_cast<std::size_t>(nch);
@@ -102,8 +102,8 @@ inline void blur_rows(const double* in, double* out, int w, int h, int nch, cons
 inline void gaussian_blur(std::vector<double>& v, std::vector<double>& tmp, int w, int h, int nch,
                           const std::vector<double>& k, const executor& exec) {
     tmp.resize(v.size());
-    blur_cols(v.data(), tmp.data(), w, h, nch, k, exec);
-    blur_rows(tmp.data(), v.data(), w, h, nch, k, exec);
+    blur_along_x(v.data(), tmp.data(), w, h, nch, k, exec);
+    blur_along_y(tmp.data(), v.data(), w, h, nch, k, exec);
 }
 
 // Median of 9 values by the 19-exchange network (Paeth): p[4] ends as the median.
