@@ -128,6 +128,7 @@ constexpr void for_each_half_field(F&& f) {
     f("local", &H::local);
     f("highlights", &H::highlights);
     f("consistent", &H::consistent);
+    f("frame_kept", &H::frame_kept);
     f("fireflies", &H::fireflies);
     f("repaired", &H::repaired);
     f("from_other_half", &H::from_other_half);
@@ -148,6 +149,7 @@ constexpr void for_each_frame_field(F&& f) {
     f("error", &R::error);
     f("both_outliers", &R::both_outliers);
     f("variance_calibration", &R::variance_calibration);
+    f("single_level", &R::single_level);
     f("lambdas_computed", &R::lambdas_computed);
     f("scratch_bytes", &R::scratch_bytes);
     f("stage_ms", &R::stage_ms);  // a timing: differs from run to run

@@ -553,6 +553,24 @@ TEST_CASE("metrics: energy, pixels made worse, evaluation without firefly arrays
     CHECK(sim::evaluate_combined(all.data(), k4.expected, k4.highlight).relmse == Approx(c.relmse));
 }
 
+// A firefly that lands on a highlight is the method's to remove: changing the half that holds
+// it keeps the highlight; changing a half without one loses it.
+TEST_CASE("metrics: a firefly removed from a highlight keeps the highlight", "[sim]") {
+    sim::frame f = sim::simulate(sim::named_scene("highlights", 96, 64, 5));
+    std::size_t at = f.pixels();
+    for (std::size_t i = 0; i < f.pixels() && at == f.pixels(); ++i)
+        if (f.highlight[i] && f.firefly(0, i) == 0 && f.firefly(1, i) == 0 && !f.bad(0, i) && !f.bad(1, i)) at = i;
+    REQUIRE(at < f.pixels());
+    if (f.firefly_energy[0].empty()) f.firefly_energy[0].assign(f.pixels(), 0.0f);
+    f.firefly_energy[0][at] = 100.0f;  // say half A holds a firefly there
+    std::vector<float> a = f.color[0], b = f.color[1];
+    a[at * 3] += 1.0f;  // the method changed half A at the highlight
+    const std::vector<float>* cleaned[2] = {&a, &b};
+    CHECK(sim::evaluate(f, cleaned).highlight_kept == 1.0);
+    b[at * 3] += 1.0f;  // and half B, which holds none
+    CHECK(sim::evaluate(f, cleaned).highlight_kept < 1.0);
+}
+
 TEST_CASE("per-sample laws: the large-count approximation matches drawing every sample", "[sim][samples]") {
     // Quantiles of the sample mean and variance, approximation against the exact loop.
     for (const sim::distribution d : {sim::distribution::gamma, sim::distribution::lognormal})

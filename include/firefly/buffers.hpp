@@ -26,21 +26,31 @@
 //   above the tested one cannot mask it; C(K, i - 1): Bonferroni over the buffers set aside).
 //   df = (2 / pi) (2 radius + 1)^2 (K - 1), the pooled median's degrees of freedom. A pixel
 //   whose R agree exactly (v = 0, e.g. black) flags any buffer above them.
-// Promise: in a frame without fireflies the expected share of flagged pixel-buffers is at most
-// q (false_alarm): the first step's maximum of K is flagged with probability <= K q. Test
-// [buffers][calibration], simulator null scenes (gamma samples, shape 1 and 4, 8-16 samples
-// per buffer, three seeds, q = 1e-3): K = 4: 0.31 q (spread) / 0.17 q (variance); K = 8:
-// 0.30 q / 0.29 q. With use_variance at 8 samples per buffer of a renderer's mixed
-// per-sample laws (the tiny renderer example) 0.44% of the pixel-buffers are rebuilt, the
-// spread alone 0.19% (its caustic fireflies included).
+// Promise, per frame (fdr.hpp): a frame without fireflies gets no flag at all in at least
+// 1 - alpha of cases (the generalized ESD's promise), and with fireflies at most alpha of the
+// flagged pixels are expected clean. Each pixel's p-value is the smallest over its steps of
+// C(K, i - 1) P(t_df > T_i); the pixels at or below the cap q (false_alarm) go to Benjamini-
+// Hochberg over the tested pixels, and the kept ones are judged again at the frame's level to
+// say how many buffers go. The cap alone promises at most q of the pixel-buffers flagged (the
+// first step's maximum of K is flagged with probability <= K q). Tests [buffers][calibration],
+// simulator null scenes (gamma samples, shape 1 and 4, 8-16 samples per buffer): at the cap,
+// q = 1e-3, three seeds: K = 4 0.31 q (spread) / 0.17 q (variance), K = 8 0.30 q / 0.29 q;
+// per frame, 80 frames of 64x64 at alpha = 0.1: K = 4 and 8, with and without variance.
+// Frames with fireflies run at the cap (the renders and simulated scenes below: the same
+// numbers as the cap alone); a frame without them is left exactly as it was (1024x540,
+// K = 4 and 8: no flag; the cap alone flagged 43 and 89 pixels, 39 and 72 of them made worse,
+// as any change driven by the spread alone must be on average: the mean of normal buffers is
+// independent of their differences). With use_variance at 8 samples per buffer of a
+// renderer's mixed per-sample laws (the tiny renderer example) 0.44% of the pixel-buffers are
+// rebuilt, the spread alone 0.19% (its caustic fireflies included).
 // Measured, relMSE against the reference (../shared/data/cycles-caustics-seeds, 8 Cycles
 // renders of 16 samples, no variance; 128 samples in all): mean 0.496; K = 4 (2 renders per
 // buffer): median of means 0.0326, G-MoN (best threshold) 0.0321, this 0.0199 (0.0249 without
 // the energy return); K = 8: median of means 0.0242, G-MoN 0.0230, this 0.0182 (0.0234). The
 // simulator, 1024x540 (docs/accuracy.md), this / G-MoN at its best: caustics K = 4 0.034 /
 // 0.133, K = 8 0.029 / 0.086; interior K = 4 0.034 / 0.061, K = 8 0.016 / 0.042; a frame
-// without fireflies 0.00093628 / 0.00093582 at K = 4 (its false alarms, q, rebuilt). How the
-// result grows with K and what each K costs: docs/k_study.md.
+// without fireflies: unchanged, the mean's 0.00093582 at K = 4. How the result grows with K
+// and what each K costs: docs/k_study.md.
 // Highlights: a firefly on a highlight is rebuilt, rightly, which the simulator's
 // highlight_kept counts as a highlight lost (caustics 0.95, interior 0.92-0.94 kept, not lowered).
 // Not promised: heavy-tailed (lognormal) per-sample laws, as local_test.hpp: the interior
@@ -73,6 +83,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cfloat>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -81,6 +92,7 @@
 #include <vector>
 
 #include "energy.hpp"
+#include "fdr.hpp"
 #include "image_view.hpp"
 #include "parallel.hpp"
 #include "pipeline.hpp"
@@ -100,7 +112,11 @@ struct buffer_view {
 };
 
 struct cross_buffer_options {
-    double false_alarm = 1e-4;   // q: expected share of flagged pixel-buffers without fireflies
+    double alpha = 0.05;         // the frame's promise: without fireflies, no flag in at least
+                                 // 1 - alpha of frames; with them, at most alpha of the flagged
+                                 // pixels expected clean (fdr.hpp)
+    double false_alarm = 1e-4;   // q: the per-pixel level's cap (a frame dense with fireflies
+                                 // runs at q: the expected share of flagged clean pixels)
     bool use_variance = false;   // K >= 4: the noise from the given variances instead of the
                                  // spread of the buffer means (K = 3 always uses them); the
                                  // spread measured better at 8-16 samples per buffer
@@ -115,6 +131,7 @@ struct cross_buffer_options {
 inline status check_cross_buffer_options(const cross_buffer_options& o) noexcept {
     if (!(o.false_alarm > 0.0 && o.false_alarm < 0.5))
         return status{errc::invalid_argument, "false_alarm must lie in (0, 0.5)"};
+    if (!(o.alpha > 0.0 && o.alpha < 1.0)) return status{errc::invalid_argument, "alpha must lie in (0, 1)"};
     if (o.radius < 0 || o.radius > 8) return status{errc::invalid_argument, "radius must lie in [0, 8]"};
     if (!(o.energy_sigma >= 1.0 && o.energy_sigma <= 64.0))
         return status{errc::invalid_argument, "energy_sigma must lie in [1, 64]"};
@@ -127,6 +144,8 @@ struct [[nodiscard]] cross_buffer_report {
     int buffers = 0;
     std::size_t pixels = 0;
     std::size_t tested = 0;      // pixels with at least 3 usable buffers (K >= 3)
+    std::size_t candidates = 0;  // pixels flagged or non-finite at the cap level, false_alarm
+    double level = 0;            // the per-pixel level the frame's decision ran at (fdr.hpp)
     std::size_t fireflies = 0;   // pixel-buffers flagged as fireflies (rebuilt if reconstruct)
     std::size_t nonfinite = 0;   // pixel-buffers with NaN/Inf, rebuilt from the others
     std::size_t left = 0;        // pixels with more than K / 2 non-finite buffers, unchanged
@@ -218,30 +237,59 @@ inline double rest_noise(const pixel_buffers& p, int i, double mean, bool with_v
     return n >= 2 && mean > 0 ? ss / (n - 1) / (mean * mean) : std::numeric_limits<double>::quiet_NaN();
 }
 
-// Rosner-style step-down of one pixel: the largest i whose i-th highest buffer exceeds the
-// mean of the ones below it by more than step[i] noise standard deviations flags the top i
-// (a second firefly above the tested one cannot mask it). noise: the pooled relative variance
-// of y. Returns the number flagged (p.flagged set).
+// Step i of the step-down: the i-th highest buffer against the mean of the ones below it, in
+// noise standard deviations (noise: the pooled relative variance of y). NaN when it does not
+// stand above them; +infinity when they agree exactly (no noise: any excess stands out).
+inline double step_statistic(const pixel_buffers& p, int i, double noise, bool with_variance) noexcept {
+    const int n = p.usable - i;  // |R|
+    double sum = 0;
+    for (int j = i; j < p.usable; ++j) sum += p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])];
+    const double mean = sum / n;
+    const double yc = p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(i - 1)])];
+    if (!(yc > mean)) return std::numeric_limits<double>::quiet_NaN();
+    // Never below R's own noise: an edge or a highlight is noisier than its surroundings,
+    // and the buffers below the candidate say so.
+    const double own = rest_noise(p, i, mean, with_variance);
+    const double s = mean * std::sqrt(std::max(noise, own >= 0 ? own : 0.0) * (1.0 + 1.0 / n));
+    return s > 0 ? (yc - mean) / s : HUGE_VAL;
+}
+
+// The steps a pixel can take: at most floor(K / 2) buffers flagged, and one must stay clean.
+inline int step_limit(const pixel_buffers& p) noexcept {
+    return std::min(p.k / 2 - (p.k - p.usable), p.usable - 1);
+}
+
+// Rosner-style step-down of one pixel: the largest i whose step statistic exceeds step[i]
+// flags the top i (a second firefly above the tested one cannot mask it). Returns the number
+// flagged (p.flagged set).
 inline int judge_pixel(pixel_buffers& p, double noise, bool with_variance, const cross_thresholds& th) noexcept {
-    const int limit = std::min(p.k / 2 - (p.k - p.usable), p.usable - 1);
     if (!(noise >= 0)) return 0;
-    for (int i = limit; i >= 1; --i) {
-        const int n = p.usable - i;  // |R|
-        double sum = 0;
-        for (int j = i; j < p.usable; ++j) sum += p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])];
-        const double mean = sum / n;
-        const double yc = p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(i - 1)])];
-        if (!(yc > mean)) continue;
-        // Never below R's own noise: an edge or a highlight is noisier than its surroundings,
-        // and the buffers below the candidate say so.
-        const double own = rest_noise(p, i, mean, with_variance);
-        const double s = mean * std::sqrt(std::max(noise, own >= 0 ? own : 0.0) * (1.0 + 1.0 / n));
-        if (s > 0 ? (yc - mean) / s > th.step[static_cast<std::size_t>(i)] : true) {
+    for (int i = step_limit(p); i >= 1; --i) {
+        const double t = step_statistic(p, i, noise, with_variance);
+        if (t > th.step[static_cast<std::size_t>(i)]) {
             for (int j = 0; j < i; ++j) p.flagged[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])] = true;
             return i;
         }
     }
     return 0;
+}
+
+// The pixel's p-value (log) for "no firefly here": the smallest over its steps of
+// C(K, i - 1) P(t_df > T_i), the level at which judge_pixel would first flag it.
+inline double pixel_log_p(const pixel_buffers& p, double noise, bool with_variance, double df) noexcept {
+    double best = 0;
+    double log_binom = 0;  // log C(K, i - 1)
+    const int limit = step_limit(p);
+    for (int i = 1; i <= limit; ++i) {
+        const double t = step_statistic(p, i, noise, with_variance);
+        if (t > 0) {
+            // no noise to judge by (R agree exactly): the smallest p a double's log can carry
+            const double l = t == HUGE_VAL ? -DBL_MAX : log_binom + student_t_log_upper_tail(t, df);
+            best = std::min(best, l);
+        }
+        log_binom += std::log(static_cast<double>(p.k - i + 1) / i);
+    }
+    return best;
 }
 
 }  // namespace detail
@@ -261,7 +309,7 @@ public:
     detector& pair_detector() noexcept { return pair_; }
     // Work memory kept between frames, bytes (the K = 2 detector's included).
     std::size_t scratch_bytes() const noexcept {
-        return (noise_.capacity() + excess_.capacity() + profile_.capacity() + returned_.capacity() +
+        return (noise_.capacity() + log_p_.capacity() + excess_.capacity() + profile_.capacity() + returned_.capacity() +
                 error_.capacity()) *
                    sizeof(double) +
                energy_.bytes() + pair_.scratch_bytes();
@@ -369,16 +417,23 @@ private:
         });
         std::vector<row_counts> counts(static_cast<std::size_t>(h), row_counts(k));
         exec_.run(static_cast<std::size_t>(h), [&](std::size_t y) {
-            run_row(b, k, masks, clean, has_var, with_var, static_cast<int>(y), counts[y]);
+            find_row(b, k, masks, has_var, with_var, df, static_cast<int>(y), counts[y]);
+        });
+        rep.tested = 0;
+        for (const row_counts& c : counts) rep.tested += c.tested;
+        set_frame_level(counts, rep.tested, k, df);
+        exec_.run(static_cast<std::size_t>(h), [&](std::size_t y) {
+            decide_row(b, k, masks, clean, has_var, with_var, static_cast<int>(y), counts[y]);
         });
         if (returns_energy(b, k, clean)) return_energy(b, k, rep);
         for (const row_counts& c : counts) {
-            rep.tested += c.tested;
+            rep.candidates += c.found.size();
             rep.fireflies += c.fireflies;
             rep.nonfinite += c.nonfinite;
             rep.left += c.left;
             for (int i = 0; i < k; ++i) rep.per_buffer[static_cast<std::size_t>(i)] += c.per_buffer[static_cast<std::size_t>(i)];
         }
+        rep.level = frame_.q;
         if (clean && rep.left > 0)
             rep.error = status{errc::no_valid_pixels, "pixels with more than half of the buffers non-finite were left"};
         return rep;
@@ -408,10 +463,17 @@ private:
         return rep;
     }
 
+    // A pixel of a row that needs the second pass: flagged at the cap level (log p, for the
+    // frame-level decision) or with non-finite buffers to rebuild (log p = 0).
+    struct candidate {
+        int x = 0;
+        double log_p = 0;
+    };
     struct row_counts {
         explicit row_counts(int k) : per_buffer(static_cast<std::size_t>(k), 0) {}
         std::size_t tested = 0, fireflies = 0, nonfinite = 0, left = 0;
         std::vector<std::size_t> per_buffer;
+        std::vector<candidate> found;
     };
 
     // Level, relative variance and finiteness of buffer i at (x, y).
@@ -499,12 +561,16 @@ private:
         return med / (m * m * m);
     }
 
+    // Pass 2: every pixel judged at the cap level (false_alarm); those flagged, with their
+    // p-values, and those with non-finite buffers are kept for pass 3. Masks are written
+    // here for the pixels pass 3 does not visit.
     template <class C, class V>
-    void run_row(const buffer_view<C, V>* b, int k, const image_view<std::uint8_t>* masks, bool clean,
-                 bool has_var, bool with_var, int y, row_counts& rc) {
+    void find_row(const buffer_view<C, V>* b, int k, const image_view<std::uint8_t>* masks, bool has_var,
+                  bool with_var, double df, int y, row_counts& rc) {
         detail::pixel_buffers p;
         p.k = k;
         const int w = b[0].color.width();
+        rc.found.clear();
         for (int x = 0; x < w; ++x) {
             gather(b, k, x, y, has_var, p);
             const int bad = k - p.usable;
@@ -514,8 +580,47 @@ private:
                 continue;
             }
             if (p.usable >= 3) ++rc.tested;
-            const int flags =
-                detail::judge_pixel(p, pooled_noise(x, y, w, b[0].color.height(), k, with_var), with_var, thresholds_);
+            const double noise = pooled_noise(x, y, w, b[0].color.height(), k, with_var);
+            if (detail::judge_pixel(p, noise, with_var, thresholds_) > 0)
+                rc.found.push_back({x, detail::pixel_log_p(p, noise, with_var, df)});
+            else if (bad > 0)
+                rc.found.push_back({x, 0.0});
+            else
+                write_masks(masks, p, x, y);
+        }
+    }
+
+    // The frame's level (fdr.hpp): Benjamini-Hochberg at alpha over the tested pixels, never
+    // above the cap. Thresholds for pass 3 at that level.
+    void set_frame_level(const std::vector<row_counts>& counts, std::size_t tested, int k, double df) {
+        log_p_.clear();
+        for (const row_counts& c : counts)
+            for (const candidate& f : c.found)
+                if (f.log_p < 0) log_p_.push_back(f.log_p);
+        frame_log_p_ = bh_log_threshold(log_p_, tested, options_.alpha);
+        if (frame_log_p_ == -HUGE_VAL) return frame_.fill(0, k, df);  // nothing kept: q = 0 flags nothing
+        // Below 1e-300 the thresholds stop growing; every candidate kept is far past them. A
+        // hair above the kept p-value: the quantile and the tail invert each other only to
+        // rounding, and the candidate at the level itself must pass.
+        const double q = std::max(std::min(std::exp(frame_log_p_) * (1 + 1e-6), options_.false_alarm), 1e-300);
+        if (frame_.q != q || frame_.k != k || frame_.df != df) frame_.fill(q, k, df);
+    }
+
+    // Pass 3: the candidates again, judged at the frame's level, masks written, rebuilt.
+    template <class C, class V>
+    void decide_row(const buffer_view<C, V>* b, int k, const image_view<std::uint8_t>* masks, bool clean,
+                    bool has_var, bool with_var, int y, row_counts& rc) {
+        detail::pixel_buffers p;
+        p.k = k;
+        const int w = b[0].color.width();
+        for (const candidate& f : rc.found) {
+            const int x = f.x;
+            gather(b, k, x, y, has_var, p);
+            const int bad = k - p.usable;
+            const bool kept = f.log_p < 0 && f.log_p <= frame_log_p_;
+            const int flags = kept ? detail::judge_pixel(p, pooled_noise(x, y, w, b[0].color.height(), k, with_var),
+                                                         with_var, frame_)
+                                   : 0;
             rc.fireflies += static_cast<std::size_t>(flags);
             rc.nonfinite += static_cast<std::size_t>(bad);
             for (int i = 0; i < k; ++i) rc.per_buffer[static_cast<std::size_t>(i)] += p.flagged[static_cast<std::size_t>(i)];
@@ -628,7 +733,10 @@ private:
     cross_buffer_options options_;
     executor exec_;
     detector pair_;
-    detail::cross_thresholds thresholds_{};
+    detail::cross_thresholds thresholds_{};  // at the cap level, false_alarm
+    detail::cross_thresholds frame_{};       // at the frame's level (fdr.hpp)
+    double frame_log_p_ = 0;                 // log of the largest p-value kept
+    std::vector<double> log_p_;              // the candidates' p-values (log), for the level
     std::vector<double> noise_;  // per pixel: its own relative variance of y (NaN: unknown)
     std::vector<double> excess_, profile_, returned_;  // energy return: 3 channels per pixel
     std::vector<double> error_;                     // standard error of each pixel's mean level

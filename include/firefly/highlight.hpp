@@ -67,6 +67,15 @@ inline bool exceeds_other_half(const highlight_options& o, double l_out, double 
     return l_out - l_other > o.min_excess_z * noise;
 }
 
+// The excess itself, in the other half's noise: (l_out - l_other) / sqrt(2 v_other calibration)
+// (+infinity when that noise is 0 and l_out is higher). Its normal tail is the p-value the
+// frame-level decision ranks a one-half outlier by (fdr.hpp).
+inline double excess_z(double l_out, double l_other, double v_other, double calibration) noexcept {
+    const double noise = std::sqrt(2.0 * std::max(v_other, 0.0) * calibration);
+    const double d = l_out - l_other;
+    return noise > 0 ? d / noise : d > 0 ? HUGE_VAL : 0.0;
+}
+
 inline constexpr double chi2_1_median = 0.45493642311957184;
 
 namespace detail {

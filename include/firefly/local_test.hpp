@@ -84,6 +84,7 @@
 #include "parallel.hpp"
 #include "stddev.hpp"
 #include "status.hpp"
+#include "fdr.hpp"
 #include "student_t.hpp"
 
 namespace firefly {
@@ -117,17 +118,22 @@ inline status check_local_test_options(const local_test_options& o) noexcept {
     return ok_status();
 }
 
-// Pixels flagged in one half, in row-major order (sorted), with their scores (> 1: how far
-// past the threshold): T / t(q) for the pair test, z(p) / z(q) for the spatial test.
+// Pixels flagged in one half at the per-test level q, in row-major order (sorted), with their
+// scores (> 1: how far past the threshold): T / t(q) for the pair test, z(p) / z(q) for the
+// spatial test; and their p-values (natural log; doubled when both tests run, Bonferroni),
+// for the frame-level decision (fdr.hpp: bh_log_threshold over result.tested * 2 tests).
 struct local_flags {
     std::vector<std::uint32_t> index;
     std::vector<float> score;
+    std::vector<double> log_p;
 };
 
 struct local_test_result {
     std::size_t bytes() const noexcept {
         std::size_t n = 0;
-        for (const local_flags& f : half) n += f.index.capacity() * sizeof(std::uint32_t) + f.score.capacity() * sizeof(float);
+        for (const local_flags& f : half)
+            n += f.index.capacity() * sizeof(std::uint32_t) + f.score.capacity() * sizeof(float) +
+                 f.log_p.capacity() * sizeof(double);
         return n;
     }
     local_flags half[2];
@@ -145,7 +151,7 @@ struct local_band_scratch {
     local_test_result found;         // this band's flags and counts
     std::size_t bytes() const noexcept {
         return (levels.capacity() + thresholds.capacity()) * sizeof(double) + pool.capacity() * sizeof(float) +
-               (found.half[0].index.capacity() + found.half[1].index.capacity()) * 8;
+               (found.half[0].index.capacity() + found.half[1].index.capacity()) * 16;
     }
 };
 
@@ -356,11 +362,13 @@ struct local_levels_q {
     double q = 0, zq = 0;   // each test's level, and z_q
     double z_half_h = 0;    // z at homogeneity / 2 (two-sided gate)
     double z_h = 0;         // z at homogeneity (dispersion gate)
+    double log_tests = 0;   // log of the number of tests a pixel runs (Bonferroni for p)
     explicit local_levels_q(const local_test_options& o)
         : q(o.spatial ? 0.5 * o.false_alarm : o.false_alarm),
           zq(normal_upper_quantile(q)),
           z_half_h(normal_upper_quantile(0.5 * o.homogeneity)),
-          z_h(normal_upper_quantile(o.homogeneity)) {}
+          z_h(normal_upper_quantile(o.homogeneity)),
+          log_tests(o.spatial ? std::log(2.0) : 0.0) {}
 };
 
 // Paulson's (1942) normal approximation of F(d1, d2) at f: cube roots of the two chi-square
@@ -423,7 +431,7 @@ inline double neighbour_levels(const local_test_scratch& s, int w, int h, int x,
 // the other half agrees with mu (two-sided), and the levels' dispersion m sum (L/mu - 1)^2 is
 // within chi-square(n - 1). Returns the score z(p) / z(q), > 1 when flagged, else 0.
 inline double spatial_score(double hi, double lo, double m, const std::vector<double>& levels, double mu,
-                            const local_levels_q& k) noexcept {
+                            const local_levels_q& k, double& log_p) noexcept {
     const double n = static_cast<double>(levels.size());
     const double d1 = 2.0 * m, d2 = 2.0 * n * m;
     if (!(std::fabs(paulson_z(lo / mu, d1, d2)) < k.z_half_h)) return 0.0;
@@ -434,17 +442,21 @@ inline double spatial_score(double hi, double lo, double m, const std::vector<do
     if (!(m * dispersion <= chi2_h)) return 0.0;
     if (m > 1e4) {  // F near normal; lgamma would cancel
         const double z = paulson_z(hi / mu, d1, d2);
+        log_p = normal_log_upper_tail(z);
         return z > k.zq ? z / k.zq : 0.0;
     }
     const double p = f_upper_tail(hi / mu, d1, d2);
     if (!(p <= k.q)) return 0.0;
+    // Below the smallest double the tail's log is what the normal point says (Paulson).
+    log_p = p > 0 ? std::log(p) : normal_log_upper_tail(paulson_z(hi / mu, d1, d2));
     return p > 0 ? normal_upper_quantile(p) / k.zq : static_cast<double>(std::numeric_limits<float>::max());
 }
 
 // One pixel, the brighter half hi: the pair test, then (options.spatial) the spatial test,
 // each at q / 2 when both run. Returns the score (> 1: flagged), 0 otherwise.
 inline double local_score(const local_test_options& o, const local_levels_q& k, const local_test_scratch& s,
-                          local_band_scratch& band, int w, int h, int x, int y, int hi, bool& by_spatial) {
+                          local_band_scratch& band, int w, int h, int x, int y, int hi, bool& by_spatial,
+                          double& log_p) {
     local_test_result& res = band.found;
     const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
     const double l_hi = s.level[hi][i], l_lo = s.level[1 - hi][i];
@@ -475,11 +487,33 @@ inline double local_score(const local_test_options& o, const local_levels_q& k, 
         // t with 2m degrees of freedom for the gamma law, widened by the uncertainty of r~
         const double df = std::min(std::max(1.0 / (0.5 * r + 1.0 / pooled.nu), 1.0), 1e10);
         const double threshold = t > zq ? t_threshold(band, q, df) : HUGE_VAL;
-        if (t > threshold) return t / threshold;
+        if (t > threshold) {
+            log_p = k.log_tests + student_t_log_upper_tail(t, df);
+            return t / threshold;
+        }
     }
     if (!spatial_may || !(mu > 0)) return 0.0;
     by_spatial = true;
-    return spatial_score(l_hi, l_lo, 1.0 / r, band.levels, mu, k);
+    const double score = spatial_score(l_hi, l_lo, 1.0 / r, band.levels, mu, k, log_p);
+    log_p += k.log_tests;
+    return score;
+}
+
+// The pair test's p-value (log) for half hi at (x, y), with r~ as local_score takes it, over
+// the levels of a finished local_test: for a one-half outlier the global test found. NaN
+// where the pixel is not tested (a half does not count, too few neighbours, hi not higher).
+inline double pair_log_p(const local_test_options& o, const local_test_scratch& s, int w, int h, int x, int y,
+                         int hi, std::vector<float>& pool) {
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+    if (s.rel_var[0].size() <= i || s.rel_var[1].size() <= i) return nan;
+    const double r_other = s.rel_var[1 - hi][i], l_hi = s.level[hi][i], l_lo = s.level[1 - hi][i];
+    if (!(r_other == r_other) || !(s.rel_var[hi][i] == s.rel_var[hi][i]) || !(l_hi > l_lo)) return nan;
+    const pooled_estimate pooled = pooled_relative_variance(s.rel_var, w, h, x, y, o.radius, o.min_neighbours, pool);
+    if (!(pooled.nu == pooled.nu)) return nan;
+    const double r = std::max(pooled.r, r_other);
+    const double df = std::min(std::max(1.0 / (0.5 * r + 1.0 / pooled.nu), 1.0), 1e10);
+    return student_t_log_upper_tail(pair_statistic(l_hi, l_lo, r), df);
 }
 
 // Rows [y0, y1) of the test into band.found.
@@ -489,6 +523,7 @@ inline void local_rows(const local_test_options& o, const local_levels_q& k, con
     for (auto& f : found.half) {
         f.index.clear();
         f.score.clear();
+        f.log_p.clear();
     }
     found.tested = found.screened = found.spatial = 0;
     for (int y = y0; y < y1; ++y)
@@ -501,10 +536,12 @@ inline void local_rows(const local_test_options& o, const local_levels_q& k, con
             if (la == lb) continue;
             const int hi = la > lb ? 0 : 1;  // the half that could hold a firefly
             bool by_spatial = false;
-            const double score = local_score(o, k, s, band, w, h, x, y, hi, by_spatial);
+            double log_p = 0;
+            const double score = local_score(o, k, s, band, w, h, x, y, hi, by_spatial, log_p);
             if (!(score > 1.0)) continue;
             found.half[hi].index.push_back(static_cast<std::uint32_t>(i));
             found.half[hi].score.push_back(static_cast<float>(std::min(score, static_cast<double>(FLT_MAX))));
+            found.half[hi].log_p.push_back(std::min(log_p, 0.0));
             found.spatial += by_spatial;
         }
 }
@@ -520,6 +557,7 @@ status local_test(const local_half<C, V, A>& a, const local_half<C, V, A>& b, co
     for (auto& f : result.half) {
         f.index.clear();
         f.score.clear();
+        f.log_p.clear();
     }
     result.tested = result.screened = result.spatial = 0;
     if (status st = check_local_test_options(options); !st.ok()) return st;
@@ -548,6 +586,7 @@ status local_test(const local_half<C, V, A>& a, const local_half<C, V, A>& b, co
             const local_flags& f = band.found.half[hh];
             result.half[hh].index.insert(result.half[hh].index.end(), f.index.begin(), f.index.end());
             result.half[hh].score.insert(result.half[hh].score.end(), f.score.begin(), f.score.end());
+            result.half[hh].log_p.insert(result.half[hh].log_p.end(), f.log_p.begin(), f.log_p.end());
         }
         result.tested += band.found.tested;
         result.screened += band.found.screened;

@@ -7,7 +7,9 @@
 //                      fireflies bring most of the expected energy).
 //   precision          changed pixels that got a firefly or a non-finite sample / changed
 //   false_positive     changed pixels with no firefly and not a highlight / all such pixels
-//   highlight_kept     highlight pixels unchanged in both halves / highlight pixels
+//   highlight_kept     highlight pixels unchanged in every half without a firefly or a
+//                      non-finite sample there / highlight pixels (a firefly on a highlight
+//                      is the method's to remove: its half may change)
 //   relmse             mean over pixels and channels of (x - ref)^2 / (ref^2 + 0.01) for the
 //                      combined image (A + B) / 2 against the expected radiance
 //   made_worse         changed pixels (pixel x half) whose squared error against the expected
@@ -126,13 +128,13 @@ accuracy evaluate_counts(const Truth& t, int k, Orig orig, Clean clean) {
         const float* ex = &t.expected[i * 3];
         const double expected = t.expected_without_fireflies(i);
         const bool is_hl = !t.highlight.empty() && t.highlight[i];
-        bool any_changed = false;
+        bool clean_changed_here = false;  // a half without a firefly or NaN here changed
         for (int b = 0; b < k; ++b) {
             const float* o = &(*orig(b))[i * 3];
             const float* c = &(*clean(b))[i * 3];
             const bool changed = std::memcmp(o, c, 12) != 0;
-            any_changed = any_changed || changed;
             const bool hit = t.firefly(b, i) > 0 || t.bad(b, i);
+            clean_changed_here = clean_changed_here || (changed && !hit);
             if (t.firefly(b, i) > 0 && t.firefly(b, i) > 10.0 * std::fabs(expected)) {
                 ++a.visible;
                 vis_hit += changed ? 1 : 0;
@@ -149,7 +151,7 @@ accuracy evaluate_counts(const Truth& t, int k, Orig orig, Clean clean) {
         }
         if (is_hl) {
             ++hl;
-            hl_kept += any_changed ? 0 : 1;
+            hl_kept += clean_changed_here ? 0 : 1;
         }
     }
     a.recall = a.visible ? static_cast<double>(vis_hit) / static_cast<double>(a.visible) : 1.0;

@@ -1,0 +1,74 @@
+// firefly: one promise per frame for the tests that run once per pixel.
+//
+// The local test and the K-buffer test each run a test at every pixel. At a fixed per-test
+// level q, a frame of m tests without a single firefly still gets about q m flags (55 at
+// 1024x540 and q = 1e-4), and every flag rebuilds a good pixel: the frame comes out worse
+// than it went in. The generalized ESD makes its promise per frame instead (no detection in
+// at least 1 - alpha of frames without outliers); these tests now do the same, by the step-up
+// procedure of Benjamini and Hochberg (1995): with the p-values sorted, p_(1) <= ... <= p_(m),
+// keep every flag with p <= p_(k), k the largest with p_(k) <= alpha k / m.
+//
+//   - without fireflies (every null hypothesis true) it flags nothing in at least 1 - alpha
+//     of frames (Simes 1986), the ESD's promise;
+//   - with fireflies, the expected share of flags that are not fireflies is at most alpha;
+//   - a frame with many fireflies keeps its power: the threshold grows with the count.
+//
+// The tests screen at a cap level first (their false_alarm option) and hand over only the
+// p-values at or below it, which are the smallest of all m: their ranks are the true ranks.
+// The kept set is then BH's set intersected with p <= cap, so the cap can only make the
+// procedure stricter. Independence across pixels is assumed (positive dependence, as
+// between neighbours that share a noise estimate, keeps the promise: Benjamini and
+// Yekutieli 2001). One pixel moves the threshold by at most one rank, alpha / m.
+//
+// p-values are carried as logarithms: a 1e30 firefly next to 1e-3 pixels has p far below
+// the smallest double.
+#pragma once
+
+#include <algorithm>
+#include <cfloat>
+#include <cmath>
+#include <cstddef>
+#include <limits>
+#include <vector>
+
+#include "student_t.hpp"
+
+namespace firefly {
+
+// The log of the largest p-value Benjamini-Hochberg keeps at level alpha among m tests, given
+// the log p-values of the candidates (any order; sorted in place). -infinity when it keeps
+// none (no candidate, m = 0, alpha <= 0 or NaN), and at least -DBL_MAX when it keeps any.
+// NaN log p-values count as p = 1.
+inline double bh_log_threshold(std::vector<double>& log_p, std::size_t m, double alpha) {
+    const double none = -std::numeric_limits<double>::infinity();
+    if (log_p.empty() || m == 0 || !(alpha > 0)) return none;
+    for (double& l : log_p) {
+        if (!(l <= 0)) l = 0;               // NaN or > 0: p = 1
+        l = std::max(l, -DBL_MAX);          // p = 0 is a p-value too, not "none"
+    }
+    std::sort(log_p.begin(), log_p.end());
+    const std::size_t n = std::min(log_p.size(), m);
+    const double log_alpha_over_m = std::log(std::min(alpha, 1.0)) - std::log(static_cast<double>(m));
+    for (std::size_t k = n; k >= 1; --k)  // step up: the largest rank that passes
+        if (log_p[k - 1] <= log_alpha_over_m + std::log(static_cast<double>(k))) return log_p[k - 1];
+    return none;
+}
+
+// log P(Z > z) for a standard normal Z, z any real: log(erfc(z / sqrt 2) / 2), and past
+// z = 30, where erfc underflows, Mills' ratio to four terms.
+inline double normal_log_upper_tail(double z) noexcept {
+    if (z < 30.0) return std::log(0.5 * std::erfc(z / std::sqrt(2.0)));
+    const double z2 = z * z;
+    const double series = 1.0 - 1.0 / z2 + 3.0 / (z2 * z2) - 15.0 / (z2 * z2 * z2);
+    return -0.5 * z2 - std::log(z) - 0.5 * std::log(2.0 * 3.141592653589793) + std::log(series);
+}
+
+// log P(T > t) for Student's t with df degrees of freedom (t >= 0, df >= 1); above 1e7 degrees
+// of freedom the normal tail (the difference is below 1e-6 relative there).
+inline double student_t_log_upper_tail(double t, double df) noexcept {
+    if (!(t > 0)) return t == 0 ? std::log(0.5) : std::numeric_limits<double>::quiet_NaN();
+    if (df > 1e7) return normal_log_upper_tail(t);
+    return detail::student_t_tail<double>(t, df).log_p;
+}
+
+}  // namespace firefly

@@ -1,0 +1,84 @@
+// Frame-level control (fdr.hpp): Benjamini and Hochberg's published example, the step-up's
+// edges (ties, a cap, m below the candidates, NaN, p below the smallest double), and the
+// log tails it ranks by, at the points where they are known exactly.
+#include <firefly/fdr.hpp>
+
+#include <cfloat>
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "catch.hpp"
+
+using namespace firefly;
+
+namespace {
+std::vector<double> logs(const std::vector<double>& p) {
+    std::vector<double> l;
+    for (const double v : p) l.push_back(std::log(v));
+    return l;
+}
+}  // namespace
+
+// Benjamini and Hochberg (1995), section 4: 15 p-values from a clinical trial; at 0.05 the
+// step-up keeps 4 (Bonferroni, 0.05 / 15, only 3).
+TEST_CASE("fdr: Benjamini and Hochberg's example keeps the 4 smallest at 0.05", "[fdr]") {
+    std::vector<double> p = logs({0.0201, 0.0001, 0.6528, 0.0004, 0.0019, 0.0095, 0.3240, 0.0278, 0.0298,
+                                  0.0344, 0.0459, 0.4262, 0.5719, 0.7590, 1.0});
+    const double t = bh_log_threshold(p, 15, 0.05);
+    CHECK(std::exp(t) == Approx(0.0095));
+    std::size_t kept = 0;
+    for (const double l : p) kept += l <= t;
+    CHECK(kept == 4);
+    // The same candidates among more tests: the level falls with m.
+    std::vector<double> again = logs({0.0001, 0.0004, 0.0019, 0.0095});
+    CHECK(std::exp(bh_log_threshold(again, 15, 0.05)) == Approx(0.0095));
+    again = logs({0.0001, 0.0004, 0.0019, 0.0095});
+    CHECK(std::exp(bh_log_threshold(again, 150, 0.05)) == Approx(0.0004));  // 0.0019 > 3 * 0.05 / 150
+}
+
+TEST_CASE("fdr: the step-up keeps a rank that passes below ranks that do not", "[fdr]") {
+    // p_(1) = 0.02 > 0.05 / 4 fails alone, but p_(2) = 0.02 <= 2 * 0.05 / 4 keeps both.
+    std::vector<double> p = logs({0.02, 0.02, 0.9, 0.9});
+    CHECK(std::exp(bh_log_threshold(p, 4, 0.05)) == Approx(0.02));
+    p = logs({0.5, 0.6});
+    CHECK(bh_log_threshold(p, 2, 0.05) == -HUGE_VAL);
+}
+
+TEST_CASE("fdr: edges: nothing, NaN, p above 1, m below the candidates, tails below 1e-308", "[fdr]") {
+    std::vector<double> none;
+    CHECK(bh_log_threshold(none, 100, 0.05) == -HUGE_VAL);
+    std::vector<double> p = {std::log(1e-6)};
+    CHECK(bh_log_threshold(p, 0, 0.05) == -HUGE_VAL);
+    p = {std::log(1e-6)};
+    CHECK(bh_log_threshold(p, 10, std::numeric_limits<double>::quiet_NaN()) == -HUGE_VAL);
+    p = {std::numeric_limits<double>::quiet_NaN(), 3.0, std::log(1e-6)};
+    const double t = bh_log_threshold(p, 3, 0.05);
+    CHECK(std::exp(t) == Approx(1e-6));
+    CHECK(p[1] == 0.0);  // NaN and log p > 0 count as p = 1
+    p = {-2000.0, -1500.0};  // p = e^-2000: far below DBL_MIN, still ranked
+    CHECK(bh_log_threshold(p, 1000000000, 0.05) == -1500.0);
+    p = {-HUGE_VAL};  // p = 0 is kept, and not mistaken for "none"
+    CHECK(bh_log_threshold(p, 10, 0.05) == -DBL_MAX);
+    p = {std::log(0.01), std::log(0.01), std::log(0.01)};  // more candidates than tests
+    CHECK(std::exp(bh_log_threshold(p, 2, 0.05)) == Approx(0.01));
+}
+
+TEST_CASE("fdr: log tails of Student's t and the normal at known points", "[fdr]") {
+    CHECK(std::exp(student_t_log_upper_tail(1.0, 1.0)) == Approx(0.25).epsilon(1e-12));  // Cauchy
+    for (const double t : {0.5, 3.0, 1e3, 1e8}) {  // df = 2: 1/2 (1 - t / sqrt(t^2 + 2)), without cancellation
+        const double r = std::sqrt(t * t + 2.0);
+        CHECK(std::exp(student_t_log_upper_tail(t, 2.0)) == Approx(1.0 / (r * (r + t))).epsilon(1e-9));
+    }
+    CHECK(student_t_log_upper_tail(0.0, 5.0) == Approx(std::log(0.5)));
+    CHECK(std::isnan(student_t_log_upper_tail(-1.0, 5.0)));
+    // 1e9 degrees of freedom: the normal; at 1e30 standard deviations, finite and tiny.
+    CHECK(student_t_log_upper_tail(10.0, 1e9) == Approx(-53.2312851505124705783).epsilon(1e-9));
+    CHECK(std::isfinite(student_t_log_upper_tail(1e30, 3.0)));
+    CHECK(student_t_log_upper_tail(1e30, 3.0) < -200.0);
+    // Normal: exact below 30, Mills' ratio beyond (mpmath, 30 digits).
+    CHECK(normal_log_upper_tail(10.0) == Approx(-53.2312851505124705783).epsilon(1e-12));
+    CHECK(normal_log_upper_tail(30.0) == Approx(-454.321243956343197107).epsilon(1e-9));
+    CHECK(normal_log_upper_tail(40.0) == Approx(-804.608442013753788167).epsilon(1e-9));
+    CHECK(normal_log_upper_tail(0.0) == Approx(std::log(0.5)));
+}
