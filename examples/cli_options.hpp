@@ -227,7 +227,11 @@ inline void add_io_options(CLI::App& app, options& c, raw_args& r) {
 inline void add_detector_options(CLI::App& app, options& c) {
     const char* g = pair_group;
     auto& o = c.o;
-    app.add_option("--significance", o.alpha, "generalized ESD alpha")->type_name("X")->check(number_in(0, 1, true, true, "a number in (0, 1)"))->group(g);
+    app.add_option("--significance", o.alpha,
+                   "the frame's significance: the generalized ESD's alpha, and the level of the frame-level "
+                   "decision on one-half and K-buffer fireflies (a frame without fireflies is left alone in "
+                   "1 - X of cases)")
+        ->type_name("X")->check(number_in(0, 1, true, true, "a number in (0, 1)"))->group("detector (every mode)");
     app.add_option("--bound", o.bound_threshold, "modified Z-score threshold")->type_name("X")->check(number_in(0, 1e30, false, false, "a number >= 0"))->group(g);
     add_choice(app, "--reduction", o.reduction,
                std::map<std::string, firefly::variance_reduction>{{"mean", firefly::variance_reduction::mean},
@@ -267,7 +271,8 @@ inline void add_detector_options(CLI::App& app, options& c) {
 
 inline void add_cross_options(CLI::App& app, options& c) {
     app.add_option("--false-alarm", c.x.false_alarm,
-                   "expected share of pixel-buffers flagged in a frame without fireflies")
+                   "the per-pixel level's cap: at most this share of pixel-buffers flagged in a frame dense "
+                   "with fireflies that are not")
         ->type_name("X")
         ->check(number_in(0, 0.5, true, true, "a number in (0, 0.5)"))
         ->group(cross_group);

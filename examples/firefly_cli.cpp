@@ -605,6 +605,7 @@ json options_json(const options& c) {
     static const char* modes[] = {"halves", "buffers", "renders"};
     json j{{"mode", modes[static_cast<int>(c.mode)]}, {"buffers", c.buffers()}};
     if (c.buffers() > 2) {
+        j["significance"] = c.o.alpha;
         j["false_alarm"] = c.x.false_alarm;
         j["radius"] = c.x.radius;
         j["use_variance"] = c.x.use_variance;
@@ -659,6 +660,7 @@ int run(const options& c) {
             return 1;
         }
     cross_buffer_options xo = c.x;
+    xo.alpha = c.o.alpha;
     xo.pair = c.o;
     cross_buffer_detector xd(xo, executor::threads(c.threads));
     json frames = json::array();

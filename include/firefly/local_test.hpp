@@ -42,8 +42,10 @@
 // per-sample laws that the gamma moment match holds in the tail (gamma k >= 1 is measured;
 // heavier, e.g. lognormal, flags more than q).
 //
-// Promise. In a frame without fireflies, the expected share of tested pixel-halves flagged
-// is at most q (options.false_alarm, default 1e-4). Test [local][calibration]: gamma(k)
+// Promise, per test. In a frame without fireflies, the expected share of tested pixel-halves
+// flagged is at most q (options.false_alarm, default 1e-4). Each flag carries its p-value;
+// the detector (pipeline.hpp) keeps what Benjamini-Hochberg keeps over the frame (fdr.hpp),
+// which turns this into the per-frame promise of the generalized ESD. Test [local][calibration]: gamma(k)
 // per-sample noise, k 1, 4, 16, 4 to 1024 samples per half, three decades, fine detail,
 // highlights (25x, per-sample shape 0.16), black background, alpha; 534k pixel-halves:
 //     q = 1e-3: 309 flagged (promise 534);  q = 1e-4: 49 flagged (promise 53)
