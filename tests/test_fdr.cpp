@@ -5,6 +5,7 @@
 
 #include <cfloat>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <vector>
 
@@ -81,4 +82,34 @@ TEST_CASE("fdr: log tails of Student's t and the normal at known points", "[fdr]
     CHECK(normal_log_upper_tail(30.0) == Approx(-454.321243956343197107).epsilon(1e-9));
     CHECK(normal_log_upper_tail(40.0) == Approx(-804.608442013753788167).epsilon(1e-9));
     CHECK(normal_log_upper_tail(0.0) == Approx(std::log(0.5)));
+}
+
+// Properties: the threshold does not depend on the candidates' order, grows with alpha and
+// with the candidates' count among the same tests, and keeps a set that is BH's by definition
+// (every kept p passes alpha k / m at its own rank or a higher one).
+TEST_CASE("fdr: order-free, monotone in alpha and in the evidence", "[fdr]") {
+    std::uint64_t s = 12345;
+    auto uniform = [&] {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        return (static_cast<double>(s >> 11) + 0.5) / 9007199254740992.0;
+    };
+    for (int trial = 0; trial < 50; ++trial) {
+        std::vector<double> p;
+        const std::size_t m = 1000;
+        for (int i = 0; i < 40; ++i) p.push_back(std::log(uniform() * (i < 10 ? 1e-6 : 1e-2)));
+        std::vector<double> a = p, b(p.rbegin(), p.rend());
+        const double ta = bh_log_threshold(a, m, 0.05);
+        CHECK(bh_log_threshold(b, m, 0.05) == ta);
+        std::vector<double> c = p;
+        CHECK(bh_log_threshold(c, m, 0.2) >= ta);
+        std::vector<double> d = p;
+        d.push_back(std::log(1e-9));  // one more strong candidate among the same tests
+        CHECK(bh_log_threshold(d, m, 0.05) >= ta);
+        if (ta == -HUGE_VAL) continue;
+        std::size_t kept = 0;
+        for (const double l : a) kept += l <= ta;
+        CHECK(ta <= std::log(0.05 * static_cast<double>(kept) / m) + 1e-12);
+    }
 }
