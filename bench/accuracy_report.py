@@ -68,7 +68,7 @@ def shown(scene_rows):
     """Per-scene rows: firefly, the paper, the input, the peers, and the K-buffer estimators
     when the scene has more than two buffers (on the halves they equal the input)."""
     k2 = any(r["method"].startswith("mean_k2") for r in scene_rows)
-    keep = [r for r in scene_rows if r["method"] in ("firefly", "firefly_energy", "firefly_paper", "input") + PEERS
+    keep = [r for r in scene_rows if r["method"] in ("firefly", "firefly_no_energy", "firefly_paper", "input") + PEERS
             or (is_kbuf(r["method"]) and not k2)]
     return sorted(keep, key=lambda r: r["relmse"])
 
@@ -412,8 +412,11 @@ This run: simulated frames {size}, {date}, {cpus} CPUs ({load}).
   image ((A + B) / 2, or the estimator's output) against the expected radiance (simulated) or
   the high-sample reference (real); a non-finite value counts 1e6.
 - **recall, false pos., highlights kept** (simulated only; `firefly/sim/metrics.hpp`): visible
-  firefly hits changed; clean non-highlight pixels changed; highlight pixels unchanged in both
-  halves.
+  firefly hits lowered; clean non-highlight pixels lowered; highlight pixels lowered in neither
+  half. Lowered: changed, with some channel now below the input (or a non-finite input).
+  Removing a firefly lowers its pixel; giving removed energy back (`energy.hpp`, on by default)
+  only adds light, a change of the estimate that relMSE, made worse and energy measure, not a
+  detection.
 - **changed**: pixels whose combined output differs from the input's (beyond float round-off).
 - **made worse**: pixels changed *and* further from the reference than the input was (per-pixel
   error: the relMSE term summed over the channels; a non-finite input is infinitely far), as a

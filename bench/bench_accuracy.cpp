@@ -106,11 +106,12 @@ void add_firefly_configs(std::vector<config>& c) {
         o.highlight.min_excess_z = 0;
         o.rebuild = rebuild_source::spatial;
         o.local_test = false;
+        o.return_energy = false;
     }, true);
     with("firefly_spatial_rebuild", [](detector_options& o) { o.rebuild = rebuild_source::spatial; }, true);
     with("firefly_no_blend", [](detector_options& o) { o.blend_spatial = false; });
     with("firefly_no_local_test", [](detector_options& o) { o.local_test = false; }, true);
-    with("firefly_energy", [](detector_options& o) { o.return_energy = true; }, true);
+    with("firefly_no_energy", [](detector_options& o) { o.return_energy = false; }, true);
     with("firefly_alpha0.01", [](detector_options& o) { o.alpha = 0.01; });
     with("firefly_alpha0.2", [](detector_options& o) { o.alpha = 0.2; });
     with("firefly_bound3.0", [](detector_options& o) { o.bound_threshold = 3.0; });

@@ -9,8 +9,9 @@
 // buffers, median of means (M = K; M = 4 too where K >= 8), G-MoN (M = K) at each threshold of
 // {0.1, 0.25, 0.4} (bench/peers.hpp, the estimators bench_accuracy.cpp runs), and
 // firefly::cross_buffer_detector twice: at its default options (the energy return of
-// energy.hpp on, K >= 3 only) and with return_energy = false. K = 2 hands the pair to
-// firefly::detector (variance required), K = 3 needs the variances, K >= 4 gets colour only,
+// energy.hpp on) and with return_energy = false (and pair.return_energy = false: K = 2 hands
+// the pair to firefly::detector, variance required, whose own return it is). K = 3 needs the
+// variances, K >= 4 gets colour only,
 // because its default (use_variance = false) judges from the spread of the buffers and a
 // renderer need not keep variance for it (the memory section checks that the output is the
 // same with them). relMSE is sim::relmse against the expected radiance, as in the accuracy
@@ -269,6 +270,7 @@ bool default_variance(int k) { return k <= 3; }
 cross_buffer_options without_return() {
     cross_buffer_options o;
     o.return_energy = false;
+    o.pair.return_energy = false;  // K = 2: the half-buffer detector's own
     return o;
 }
 
@@ -662,8 +664,8 @@ std::string preamble(const study& s, double seconds) {
     for (int total : s.totals) t += fmt(" %d", total);
     t += fmt(" samples per pixel split over K buffers; relMSE averaged over the seeds; firefly on one thread "
              "(serial executor), one detector per K and option set kept over all frames; \"firefly\" is "
-             "cross_buffer_detector at its defaults (energy return on, sigma 8; it does not apply at K = 2, "
-             "the half-buffer detector), \"no energy return\" the same with return_energy = false; G-MoN at "
+             "cross_buffer_detector at its defaults (energy return on, sigma 8; at K = 2 the half-buffer "
+             "detector's own), \"no energy return\" the same with return_energy = false (both); G-MoN at "
              "its best threshold of 0.1, 0.25, 0.4; %s build; run took %.0f s.\n",
 #ifdef NDEBUG
              "NDEBUG",

@@ -232,6 +232,15 @@ inline void add_detector_options(CLI::App& app, options& c) {
                    "decision on one-half and K-buffer fireflies (a frame without fireflies is left alone in "
                    "1 - X of cases)")
         ->type_name("X")->check(number_in(0, 1, true, true, "a number in (0, 1)"))->group("detector (every mode)");
+    app.add_flag_callback("--no-energy-return", [&c] { c.o.return_energy = c.x.return_energy = false; },
+                          "remove fireflies only: do not give back the energy of fireflies that fell densely "
+                          "(firefly/energy.hpp)")
+        ->group("detector (every mode)");
+    app.add_option_function<double>("--energy-sigma", [&c](double v) { c.o.energy_sigma = c.x.energy_sigma = v; },
+                                    "width in pixels of the energy return's Gaussian")
+        ->type_name("X")
+        ->check(number_in(1, 64, false, false, "a number from 1 to 64"))
+        ->group("detector (every mode)");
     app.add_option("--bound", o.bound_threshold, "modified Z-score threshold")->type_name("X")->check(number_in(0, 1e30, false, false, "a number >= 0"))->group(g);
     add_choice(app, "--reduction", o.reduction,
                std::map<std::string, firefly::variance_reduction>{{"mean", firefly::variance_reduction::mean},
@@ -283,14 +292,6 @@ inline void add_cross_options(CLI::App& app, options& c) {
     app.add_flag("--use-variance", c.x.use_variance,
                  "--buffers with 4 or more files: the noise from the files' variances instead of the spread of "
                  "the buffers (3 files always use them)")
-        ->group(cross_group);
-    app.add_flag_callback("--no-energy-return", [&c] { c.x.return_energy = false; },
-                          "remove fireflies only: do not give back the energy of fireflies that fell densely "
-                          "(firefly/energy.hpp)")
-        ->group(cross_group);
-    app.add_option("--energy-sigma", c.x.energy_sigma, "width in pixels of the energy return's Gaussian")
-        ->type_name("X")
-        ->check(number_in(1, 64, false, false, "a number from 1 to 64"))
         ->group(cross_group);
 }
 

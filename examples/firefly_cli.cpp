@@ -331,13 +331,13 @@ image combine(const options& c, const std::vector<buffer_data>& h) {
     return comb;
 }
 
-// A mask file, one 0/1 channel per bit: firefly::detector's four for two buffers, the
+// A mask file, one 0/1 channel per bit: firefly::detector's five for two buffers, the
 // K-buffer detector's two (firefly, nonfinite) for more.
 image mask_image(const std::vector<std::uint8_t>& mask, const image& like, bool pair) {
-    static const char* const names[4] = {"firefly", "highlight", "consistent", "nonfinite"};
-    static const std::uint8_t bits[4] = {mask_bits::firefly, mask_bits::highlight, mask_bits::consistent,
-                                         mask_bits::nonfinite};
-    const std::vector<std::size_t> used = pair ? std::vector<std::size_t>{0, 1, 2, 3} : std::vector<std::size_t>{0, 3};
+    static const char* const names[5] = {"firefly", "highlight", "consistent", "nonfinite", "energy"};
+    static const std::uint8_t bits[5] = {mask_bits::firefly, mask_bits::highlight, mask_bits::consistent,
+                                         mask_bits::nonfinite, mask_bits::energy};
+    const std::vector<std::size_t> used = pair ? std::vector<std::size_t>{0, 1, 2, 3, 4} : std::vector<std::size_t>{0, 3};
     image m;
     m.width = like.width;
     m.height = like.height;
@@ -411,6 +411,8 @@ cross_buffer_report pair_counts(const frame_report& r) {
         c.nonfinite += h.nonfinite;
         c.left += h.unreachable;
         c.per_buffer.push_back(h.fireflies + h.nonfinite);
+        c.energy_removed += h.energy_removed;
+        c.energy_returned += h.energy_returned;
     }
     return c;
 }
@@ -628,6 +630,8 @@ json options_json(const options& c) {
                   {"sigma", o.reconstruction.sigma},
                   {"tolerance", o.reconstruction.tolerance},
                   {"iterations", o.reconstruction.max_iterations},
+                  {"return_energy", o.return_energy},
+                  {"energy_sigma", o.energy_sigma},
                   {"threads", c.threads}});
     return j;
 }

@@ -581,18 +581,20 @@ expect_fail(halves_cross_option "--radius is an option of the K-buffer detector"
 expect_fail(false_alarm_range "--false-alarm" ${O} --renders ${renders4} -o ${O} --false-alarm 0.5)
 expect_fail(radius_range "--radius" ${O} --renders ${renders4} -o ${O} --radius 9)
 expect_fail(energy_sigma_range "--energy-sigma" ${O} --renders ${renders4} -o ${O} --energy-sigma 0.5)
-expect_fail(halves_energy_option "--no-energy-return is an option of the K-buffer detector" ${O} ${A} ${B} -o ${O}
-            --no-energy-return)
-# the energy return's options reach the detector and the report
-expect_ok(renders_no_energy --renders ${renders4} -o ${WORK}/noen.exr --no-energy-return --energy-sigma 4
-          --report ${WORK}/noen.json -q)
-file(READ "${WORK}/noen.json" json)
-string(JSON ret GET "${json}" options return_energy)
-string(JSON sg GET "${json}" options energy_sigma)
-string(JSON returned GET "${json}" frames 0 energy_returned)
-if(NOT ret STREQUAL "OFF" OR NOT sg EQUAL 4 OR NOT returned EQUAL 0)
-  message(FATAL_ERROR "--no-energy-return / --energy-sigma: report has ${ret} ${sg} ${returned}")
-endif()
+# the energy return's options reach the detector and the report, in both modes
+function(check_energy_options name want)
+  expect_ok(${name} ${ARGN} --report ${WORK}/${name}.json -q)
+  file(READ "${WORK}/${name}.json" json)
+  string(JSON ret GET "${json}" options return_energy)
+  string(JSON sg GET "${json}" options energy_sigma)
+  string(JSON returned GET "${json}" frames 0 energy_returned)
+  if(NOT ret STREQUAL want OR (want STREQUAL "OFF" AND (NOT sg EQUAL 4 OR NOT returned EQUAL 0)))
+    message(FATAL_ERROR "${name}: report has return_energy ${ret}, sigma ${sg}, returned ${returned}")
+  endif()
+endfunction()
+check_energy_options(renders_no_energy OFF --renders ${renders4} -o ${WORK}/noen.exr --no-energy-return --energy-sigma 4)
+check_energy_options(halves_no_energy OFF ${A} ${B} -o ${WORK}/noen2.exr --no-energy-return --energy-sigma 4)
+check_energy_options(halves_energy_default ON ${A} ${B} -o ${WORK}/en2.exr)
 expect_fail(renders_one_variance_name "--variance wants three names" ${O} --renders ${renders4} -o ${O} --variance V)
 
 # a sequence of two frames: frame 1 has the firefly, frame 2 is the twin; both outputs hold

@@ -25,14 +25,15 @@ sim::frame scene(int w, int h) {
     f.alpha.clear();
     return f;
 }
-std::vector<float> packed_run(const sim::frame& f, std::vector<std::uint8_t>* masks = nullptr) {
+std::vector<float> packed_run(const sim::frame& f, std::vector<std::uint8_t>* masks = nullptr,
+                              const detector_options& options = {}) {
     std::vector<float> c[2] = {f.color[0], f.color[1]}, v[2] = {f.variance[0], f.variance[1]};
     half_buffer<float> hb[2];
     for (int k = 0; k < 2; ++k) {
         hb[k].color = *make_image_view(c[k].data(), f.width, f.height, 3);
         hb[k].variance = *make_image_view(v[k].data(), f.width, f.height, 3);
     }
-    detector d;
+    detector d(options);
     if (masks) {
         masks[0].assign(f.pixels(), 0);
         masks[1].assign(f.pixels(), 0);
@@ -143,7 +144,12 @@ TEST_CASE("float colour, half-float variance and a double alpha buffer", "[integ
     sim::frame f = scene(w, h);
     for (int k = 0; k < 2; ++k)
         for (float& v : f.variance[k]) v = to_float(to_half(v));  // what half storage keeps
-    const std::vector<float> ref = packed_run(f);
+    // The energy return off in every run: it adds light where the return exceeds a pixel's
+    // standard error, and a rebuilt pixel's variance, stored as half, may sit on either side
+    // of that (here 2 of 3072 pixels: 0.003 added in one run, not in the other).
+    detector_options o;
+    o.return_energy = false;
+    const std::vector<float> ref = packed_run(f, nullptr, o);
     std::vector<float> col[2];
     std::vector<half16> var[2];
     std::vector<double> alpha(f.pixels(), 1.0);
@@ -156,7 +162,7 @@ TEST_CASE("float colour, half-float variance and a double alpha buffer", "[integ
         hb[k].variance = *make_image_view(var[k].data(), w, h, 3);
         hb[k].alpha = *make_image_view(static_cast<const double*>(alpha.data()), w, h, 1);
     }
-    detector d;
+    detector d(o);
     firefly_examples::half16_rows_converted = 0;
     const frame_report r = d.process(hb[0], hb[1]);
     REQUIRE(r.ok());
@@ -173,7 +179,7 @@ TEST_CASE("float colour, half-float variance and a double alpha buffer", "[integ
         hf[k].variance = *make_image_view(var2[k].data(), w, h, 3);
     }
     firefly_examples::half16_rows_converted = 0;
-    detector d2;
+    detector d2(o);
     REQUIRE(d2.process(hf[0], hf[1]).ok());
     CHECK(firefly_examples::half16_rows_converted == static_cast<std::size_t>(4 * h));
     for (int k = 0; k < 2; ++k) CHECK(col2[k] == col[k]);  // both paths: the same bits
@@ -215,19 +221,27 @@ TEST_CASE("the report and the masks, as a denoiser would use them", "[integratio
     const sim::frame f = scene(w, h);
     std::vector<std::uint8_t> m[2];
     const std::vector<float> out = packed_run(f, m);
-    std::size_t fireflies = 0, other = 0, changed = 0, changed_unmarked = 0;
+    std::size_t fireflies = 0, other = 0, changed = 0, changed_unmarked = 0, energy = 0, lowered_by_energy = 0;
     for (int k = 0; k < 2; ++k)
         for (std::size_t i = 0; i < f.pixels(); ++i) {
             fireflies += (m[k][i] & mask_bits::firefly) != 0;
             other += (m[k][i] & mask_bits::other_half) != 0;
             const bool ch = std::memcmp(&out[static_cast<std::size_t>(k) * f.pixels() * 3 + i * 3], &f.color[k][i * 3], 12) != 0;
             changed += ch;
-            changed_unmarked += ch && !(m[k][i] & (mask_bits::firefly | mask_bits::nonfinite));
+            changed_unmarked += ch && !(m[k][i] & (mask_bits::firefly | mask_bits::nonfinite | mask_bits::energy));
+            energy += (m[k][i] & mask_bits::energy) != 0;
+            // the energy return only adds light
+            const float* o = &out[static_cast<std::size_t>(k) * f.pixels() * 3 + i * 3];
+            const float* in = &f.color[k][i * 3];
+            if ((m[k][i] & mask_bits::energy) && !(m[k][i] & mask_bits::firefly))
+                lowered_by_energy += o[0] < in[0] || o[1] < in[1] || o[2] < in[2];
         }
     CHECK(fireflies > 0);
     CHECK(other > 0);  // pixels whose halves are now correlated: a denoiser's cross-validation skips them
     CHECK(changed > 0);
     CHECK(changed_unmarked == 0);  // every change is marked
+    CHECK(energy > 0);
+    CHECK(lowered_by_energy == 0);
 }
 
 TEST_CASE("half colour and variance: the bulk row path and value-by-value loading agree", "[integration]") {

@@ -553,8 +553,9 @@ TEST_CASE("metrics: energy, pixels made worse, evaluation without firefly arrays
     CHECK(sim::evaluate_combined(all.data(), k4.expected, k4.highlight).relmse == Approx(c.relmse));
 }
 
-// A firefly that lands on a highlight is the method's to remove: changing the half that holds
-// it keeps the highlight; changing a half without one loses it.
+// A firefly that lands on a highlight is the method's to remove: lowering the half that holds
+// it keeps the highlight; lowering a half without one loses it; adding light (the energy
+// return) is not a removal.
 TEST_CASE("metrics: a firefly removed from a highlight keeps the highlight", "[sim]") {
     sim::frame f = sim::simulate(sim::named_scene("highlights", 96, 64, 5));
     std::size_t at = f.pixels();
@@ -564,10 +565,14 @@ TEST_CASE("metrics: a firefly removed from a highlight keeps the highlight", "[s
     if (f.firefly_energy[0].empty()) f.firefly_energy[0].assign(f.pixels(), 0.0f);
     f.firefly_energy[0][at] = 100.0f;  // say half A holds a firefly there
     std::vector<float> a = f.color[0], b = f.color[1];
-    a[at * 3] += 1.0f;  // the method changed half A at the highlight
+    a[at * 3] -= 1.0f;  // the method lowered half A at the highlight
     const std::vector<float>* cleaned[2] = {&a, &b};
     CHECK(sim::evaluate(f, cleaned).highlight_kept == 1.0);
-    b[at * 3] += 1.0f;  // and half B, which holds none
+    b[at * 3 + 1] += 1.0f;  // added light to half B, which holds none: changed, not lowered
+    CHECK(sim::evaluate(f, cleaned).highlight_kept == 1.0);
+    CHECK(sim::evaluate(f, cleaned).changed == 2);
+    CHECK(sim::evaluate(f, cleaned).lowered == 1);
+    b[at * 3] -= 1.0f;  // and lowered it
     CHECK(sim::evaluate(f, cleaned).highlight_kept < 1.0);
 }
 

@@ -125,7 +125,8 @@ struct cross_buffer_options {
     bool return_energy = true;   // K >= 3, 3 or 4 channels: the removed fireflies' energy is
                                  // returned where many agree on it (energy.hpp)
     double energy_sigma = 8.0;   // its Gaussian's width in pixels (1 to 64)
-    detector_options pair{};     // K = 2: firefly::detector's options
+    detector_options pair{};     // K = 2: firefly::detector's options (its own
+                                 // return_energy, on by default too)
 };
 
 inline status check_cross_buffer_options(const cross_buffer_options& o) noexcept {
@@ -309,8 +310,7 @@ public:
     detector& pair_detector() noexcept { return pair_; }
     // Work memory kept between frames, bytes (the K = 2 detector's included).
     std::size_t scratch_bytes() const noexcept {
-        return (noise_.capacity() + log_p_.capacity() + excess_.capacity() + profile_.capacity() + returned_.capacity() +
-                error_.capacity()) *
+        return (noise_.capacity() + log_p_.capacity() + excess_.capacity() + row_returned_.capacity()) *
                    sizeof(double) +
                energy_.bytes() + pair_.scratch_bytes();
     }
@@ -685,49 +685,46 @@ private:
         // The shape: the input's mean (the clean mean plus what was removed), whose 3x3
         // median keeps where fireflies fall densely (a caustic lit mostly by them) and drops
         // the lone ones; the clean mean alone misplaces that light at high K (few samples a
-        // buffer: most of a caustic's light is then flagged).
-        profile_.assign(excess_.size(), 0.0);
-        error_.assign(excess_.size() / 3, 0.0);
-        exec_.run(static_cast<std::size_t>(h), [&](std::size_t row) {
-            const int y = static_cast<int>(row);
-            for (int x = 0; x < w; ++x) {
-                double level[detail::max_buffers] = {};
+        // buffer: most of a caustic's light is then flagged). Made row by row as needed.
+        auto shape_row = [&](int y, double* row) {
+            for (int x = 0; x < w; ++x)
                 for (int c = 0; c < 3; ++c) {
                     double sum = 0;
-                    for (int i = 0; i < k; ++i) {
-                        const double v = b[i].color.load(x, y, c);
-                        sum += v;
-                        level[i] += v / 3.0;
-                    }
+                    for (int i = 0; i < k; ++i) sum += b[i].color.load(x, y, c);
                     const double m = sum / k;
                     const std::size_t i = index(x, y, w) * 3 + static_cast<std::size_t>(c);
-                    profile_[i] = (std::isfinite(m) && m > 0 ? m : 0.0) + excess_[i];
+                    row[static_cast<std::size_t>(x) * 3 + static_cast<std::size_t>(c)] = (std::isfinite(m) && m > 0 ? m : 0.0) + excess_[i];
                 }
-                error_[index(x, y, w)] = standard_error(level, k);
-            }
-        });
-        energy_return(excess_, profile_, w, h, options_.energy_sigma, returned_, energy_, exec_);
+        };
+        energy_model_rows(excess_, shape_row, w, h, options_.energy_sigma, energy_, exec_);
+        row_returned_.assign(static_cast<std::size_t>(h), 0.0);
         if constexpr (!std::is_const_v<C>)
             exec_.run(static_cast<std::size_t>(h), [&](std::size_t row) {
                 const int y = static_cast<int>(row);
                 for (int x = 0; x < w; ++x) {
-                    double* add = &returned_[index(x, y, w) * 3];
+                    double add[3];
+                    energy_at(energy_, x, y, add);
+                    if (!(add[0] + add[1] + add[2] > 0)) continue;
                     // Only where the return is larger than the pixel's own noise (the standard
                     // error of its mean level): below it the change cannot lower the pixel's
                     // expected error by much, and the pixel is left as it was.
-                    if (!((add[0] + add[1] + add[2]) / 3.0 > error_[index(x, y, w)])) {
-                        add[0] = add[1] = add[2] = 0.0;
+                    double level[detail::max_buffers] = {};
+                    for (int c = 0; c < 3; ++c)
+                        for (int i = 0; i < k; ++i) level[i] += b[i].color.load(x, y, c) / 3.0;
+                    if (!((add[0] + add[1] + add[2]) / 3.0 > standard_error(level, k))) continue;
+                    // every buffer alike, or none where a sum does not fit a buffer's type
+                    double old[detail::max_buffers][3];
+                    bool fits = true;
+                    for (int i = 0; i < k; ++i) fits = add_light(b[i].color, x, y, add, old[i]) && fits;
+                    if (!fits) {
+                        for (int i = 0; i < k; ++i) restore_light(b[i].color, x, y, old[i], add);
                         continue;
                     }
-                    for (int c = 0; c < 3; ++c)
-                        if (add[c] > 0)
-                            for (int i = 0; i < k; ++i) b[i].color.store(x, y, c, b[i].color.load(x, y, c) + add[c]);
+                    row_returned_[row] += (add[0] + add[1] + add[2]) / 3.0;
                 }
             });
-        for (std::size_t i = 0; i < excess_.size(); ++i) {
-            rep.energy_removed += excess_[i] / 3.0;
-            rep.energy_returned += returned_[i] / 3.0;
-        }
+        for (std::size_t i = 0; i < excess_.size(); ++i) rep.energy_removed += excess_[i] / 3.0;
+        for (const double r : row_returned_) rep.energy_returned += r;
     }
 
     cross_buffer_options options_;
@@ -738,8 +735,8 @@ private:
     double frame_log_p_ = 0;                 // log of the largest p-value kept
     std::vector<double> log_p_;              // the candidates' p-values (log), for the level
     std::vector<double> noise_;  // per pixel: its own relative variance of y (NaN: unknown)
-    std::vector<double> excess_, profile_, returned_;  // energy return: 3 channels per pixel
-    std::vector<double> error_;                     // standard error of each pixel's mean level
+    std::vector<double> excess_;        // energy return: what was removed, 3 channels per pixel
+    std::vector<double> row_returned_;  // energy return: what was given back, per row
 
     // The standard error of the mean of k levels (their spread / sqrt(k)); k >= 3 here.
     static double standard_error(const double* level, int k) noexcept {

@@ -19,16 +19,24 @@
 // variance M would have if each e_q were one draw of a sparse process, so
 //     s = max(0, 1 - V / |M|^2)
 // keeps M where many fireflies agree on it and drops it where one or two make it up: a lone
-// firefly (V = |M|^2) returns nothing, so no glow is painted around it. The sum over q of
-// w_q^2 e_q^2 is an exact Gaussian blur at sigma / sqrt(2) of e^2, rescaled.
+// firefly (V = |M|^2) returns nothing, so no glow is painted around it.
 //
-// Every blur sums opposite taps first (v[-i] + v[+i]): a flipped frame gives the flipped
-// result bit for bit. Arithmetic in double: a 1e30 excess squared stays finite.
+// Evaluation: s ratio is smooth at the Gaussian's scale, so M, L and V are summed exactly (the
+// separable Gaussian, taps to 3 sigma, V with the squared taps) only at nodes every
+// node_step(sigma) pixels (sigma / 2, a power of two), and s ratio is interpolated bilinearly
+// between nodes: a fraction of the work of full blurs, and a lone firefly still has s = 0 at
+// every node. Nodes are placed symmetrically, every sum adds opposite taps first
+// (v[-i] + v[+i]), and the sums and the interpolation are the mean of both orders (x first,
+// y first): a flipped or transposed frame gives the flipped or transposed result bit for bit.
+// Arithmetic in double: a 1e30 excess squared stays finite.
 #pragma once
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "image_view.hpp"
@@ -38,173 +46,425 @@ namespace firefly {
 
 namespace detail {
 
-// Normalised 1-D Gaussian weights w[0..r] (w[i] for offsets +-i); r = 3 sigma unless given.
-inline std::vector<double> gaussian_weights(double sigma, int r = 0) {
-    if (r <= 0) r = std::max(1, static_cast<int>(std::ceil(3.0 * sigma)));
-    std::vector<double> w(static_cast<std::size_t>(r) + 1);
+// The nodes the return is evaluated at along one axis of n pixels: every `step` pixels (a
+// power of two), symmetric about the axis' centre, the first at or before pixel 0 and the last
+// at or after pixel n - 1. Positions are kept doubled (pos2 = 2 x), so a node between two
+// pixels (half-integer) is exact.
+struct node_axis {
+    int count = 1, step = 1;
+    int pos2(int j) const noexcept { return (pixels - 1) + (2 * j - (count - 1)) * step; }
+    int pixels = 1;
+};
+
+inline node_axis make_node_axis(int pixels, int step) {
+    node_axis a;
+    a.pixels = pixels;
+    a.step = step;
+    a.count = (pixels - 1 + step - 1) / step + 1;  // (count - 1) step >= pixels - 1
+    return a;
+}
+
+// The largest power of two at most sigma / 2 (at least 1): a Gaussian of that width varies
+// little between nodes that far apart (linear interpolation's error at a peak ~ step^2 /
+// (8 sigma^2) <= 1/32), and a power of two keeps the interpolation weights exact.
+inline int node_step(double sigma) {
+    int s = 1;
+    while (2.0 * s <= sigma / 2.0) s *= 2;
+    return s;
+}
+
+// Gaussian tap weights for one node parity: offsets d (integer node) or d + 1/2 (a node
+// between pixels), d = 0..r; normalised so that the taps on both sides sum to 1. `sq`: the
+// weights squared, for the sum of squared weights of the James-Stein factor.
+struct tap_weights {
+    std::vector<double> w, sq;
+    bool half = false;
+};
+
+inline tap_weights make_taps(double sigma, int r, bool half) {
+    tap_weights t;
+    t.half = half;
+    t.w.resize(static_cast<std::size_t>(r) + 1);
     double sum = 0;
-    for (int i = 0; i <= r; ++i) {
-        w[static_cast<std::size_t>(i)] = std::exp(-0.5 * i * i / (sigma * sigma));
-        sum += i == 0 ? w[0] : 2.0 * w[static_cast<std::size_t>(i)];
+    for (int d = 0; d <= r; ++d) {
+        const double o = d + (half ? 0.5 : 0.0);
+        t.w[static_cast<std::size_t>(d)] = std::exp(-0.5 * o * o / (sigma * sigma));
+        sum += (d == 0 && !half) ? t.w[0] : 2.0 * t.w[static_cast<std::size_t>(d)];
     }
-    for (double& v : w) v /= sum;
-    return w;
+    t.sq.resize(t.w.size());
+    for (std::size_t d = 0; d < t.w.size(); ++d) {
+        t.w[d] /= sum;
+        t.sq[d] = t.w[d] * t.w[d];
+    }
+    return t;
 }
 
-// The pass along x: each row copied into a zero-padded line (outside the frame counts as 0),
-// then k0 v[j] + sum over d of k_d (v[j - d] + v[j + d]) for every channel of the row at once
-// (d outermost: the inner loop is contiguous and vectorises). Rows as tasks on the executor.
-inline void blur_along_x(const double* in, double* out, int w, int h, int nch, const std::vector<double>& k,
-                      const executor& exec) {
-    const int r = static_cast<int>(k.size()) - 1;
-    const std::size_t row = static_cast<std::size_t>(w) * static_cast<std::size_t>(nch);
-    const std::size_t margin = static_cast<std::size_t>(r) * static_cast<std::size_t>(nch);
-    exec.run(static_cast<std::size_t>(h), [&](std::size_t y) {
-        const double* src = in + y * row;
-        double* dst = out + y * row;
-        std::vector<double> pad(row + 2 * margin, 0.0);
-        std::copy(src, src + row, pad.begin() + static_cast<std::ptrdiff_t>(margin));
-        const double* p = pad.data() + margin;
-        for (std::size_t j = 0; j < row; ++j) dst[j] = k[0] * p[j];
-        for (int d = 1; d <= r; ++d) {
-            const std::size_t off = static_cast<std::size_t>(d) * static_cast<std::size_t>(nch);
-            const double kd = k[static_cast<std::size_t>(d)];
-            for (std::size_t j = 0; j < row; ++j) dst[j] += kd * (p[j - off] + p[j + off]);
-        }
-    });
+// The positions a node's tap d reads (doubled position p2): lo and hi pixel, -1 outside.
+struct tap_pair {
+    int lo, hi;
+};
+inline tap_pair taps_at(int p2, int d, bool half, int n) noexcept {
+    const int o2 = 2 * d + (half ? 1 : 0);
+    const int lo = (p2 - o2) / 2, hi = (p2 + o2) / 2;  // p2 -+ o2 is even
+    return {p2 - o2 >= 0 && lo < n ? lo : -1, hi >= 0 && hi < n ? hi : -1};
 }
 
-// The pass along y, a whole row at a time (contiguous: it vectorises, where a column's
-// stride would not); the same sums in the same order as along x.
-inline void blur_along_y(const double* in, double* out, int w, int h, int nch, const std::vector<double>& k,
-                      const executor& exec) {
-    const int r = static_cast<int>(k.size()) - 1;
-    const std::size_t row = static_cast<std::size_t>(w) * static_cast<std::size_t>(nch);
-    exec.run(static_cast<std::size_t>(h), [&](std::size_t yy) {
-        const int y = static_cast<int>(yy);
-        double* dst = out + yy * row;
-        const double* mid = in + yy * row;
-        for (std::size_t i = 0; i < row; ++i) dst[i] = k[0] * mid[i];
-        for (int d = 1; d <= r; ++d) {
-            const double* lo = y - d >= 0 ? in + static_cast<std::size_t>(y - d) * row : nullptr;
-            const double* hi = y + d < h ? in + static_cast<std::size_t>(y + d) * row : nullptr;
-            const double kd = k[static_cast<std::size_t>(d)];
-            if (lo && hi)
-                for (std::size_t i = 0; i < row; ++i) dst[i] += kd * (lo[i] + hi[i]);
-            else if (lo || hi) {
-                const double* p = lo ? lo : hi;
-                for (std::size_t i = 0; i < row; ++i) dst[i] += kd * (p[i] + 0.0);
-            }
-        }
-    });
+// The record of the model's sums at a pixel or node: M (3 channels), L (3), V, padding.
+inline constexpr int record = 8;
+
+// The median of 3 values.
+inline double median3(double a, double b, double c) noexcept {
+    return std::max(std::min(a, b), std::min(std::max(a, b), c));
 }
 
-inline void gaussian_blur(std::vector<double>& v, std::vector<double>& tmp, int w, int h, int nch,
-                          const std::vector<double>& k, const executor& exec) {
-    tmp.resize(v.size());
-    blur_along_x(v.data(), tmp.data(), w, h, nch, k, exec);
-    blur_along_y(tmp.data(), v.data(), w, h, nch, k, exec);
-}
-
-// Median of 9 values by the 19-exchange network (Paeth): p[4] ends as the median.
-inline double median9(double* p) noexcept {
-    auto sort2 = [](double& a, double& b) {
-        const double lo = std::min(a, b), hi = std::max(a, b);
-        a = lo;
-        b = hi;
-    };
-    sort2(p[1], p[2]), sort2(p[4], p[5]), sort2(p[7], p[8]), sort2(p[0], p[1]), sort2(p[3], p[4]);
-    sort2(p[6], p[7]), sort2(p[1], p[2]), sort2(p[4], p[5]), sort2(p[7], p[8]), sort2(p[0], p[3]);
-    sort2(p[5], p[8]), sort2(p[4], p[7]), sort2(p[3], p[6]), sort2(p[1], p[4]), sort2(p[2], p[5]);
-    sort2(p[4], p[7]), sort2(p[4], p[2]), sort2(p[6], p[4]), sort2(p[4], p[2]);
-    return p[4];
-}
-
-// 3x3 median of each of 3 interleaved channels (the frame's edge: the pixels inside it, the
-// mean of the middle two where they are even in number). Values are finite.
-inline void median3x3(const std::vector<double>& in, std::vector<double>& out, int w, int h, const executor& exec) {
-    out.resize(in.size());
-    auto at = [w](int x, int y, int c) {
-        return (static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)) * 3 + static_cast<std::size_t>(c);
-    };
+// 3x3 median of each of 3 interleaved channels of a w x h image whose rows `fill_row(y, out)`
+// writes (3 w finite values) into `out` (the frame's edge: the pixels inside it, the mean of
+// the middle two where they are even in number). Inside the frame, each column of 3 is sorted
+// once and the median of the 9 is the median of (the largest column minimum, the median
+// column median, the smallest column maximum): min and max only select, so the value is the
+// 9's median exactly. Rows are made as needed: no frame-sized copy of the input.
+template <class T, class FillRow>
+inline void median3x3_rows(FillRow&& fill_row, std::vector<T>& out, int w, int h, const executor& exec) {
+    // a median past the range of T (a float profile of a 2 FLT_MAX sum) is kept at its largest
+    auto put = [](double v) { return static_cast<T>(std::min(v, static_cast<double>(std::numeric_limits<T>::max()))); };
+    const std::size_t n = static_cast<std::size_t>(w) * 3;
+    out.resize(n * static_cast<std::size_t>(h));
     exec.run(static_cast<std::size_t>(h), [&](std::size_t row) {
         const int y = static_cast<int>(row);
-        for (int x = 0; x < w; ++x)
-            for (int c = 0; c < 3; ++c) {
-                double t[9] = {};
-                int n = 0;
-                for (int yy = std::max(0, y - 1); yy <= std::min(h - 1, y + 1); ++yy)
-                    for (int xx = std::max(0, x - 1); xx <= std::min(w - 1, x + 1); ++xx) t[n++] = in[at(xx, yy, c)];
-                if (n == 9) {
-                    out[at(x, y, c)] = median9(t);
-                    continue;
-                }
-                std::nth_element(t, t + n / 2, t + n);
-                double m = t[n / 2];
-                if (n % 2 == 0) m = 0.5 * (m + *std::max_element(t, t + n / 2));  // mean of the middle two
-                out[at(x, y, c)] = m;
-            }
+        // rows y - 1, y, y + 1 (per thread, kept: a row's allocation freed and taken again
+        // costs page faults when the allocator returns it to the system)
+        thread_local std::vector<double> rows, lo, mid, hi;
+        rows.resize(3 * n);
+        const int y0 = std::max(0, y - 1), y1 = std::min(h - 1, y + 1);
+        for (int yy = y0; yy <= y1; ++yy) fill_row(yy, &rows[static_cast<std::size_t>(yy - y + 1) * n]);
+        T* o = &out[row * n];
+        auto edge = [&](int x, int c) {
+            double t[9] = {};
+            int k = 0;
+            for (int yy = y0; yy <= y1; ++yy)
+                for (int xx = std::max(0, x - 1); xx <= std::min(w - 1, x + 1); ++xx)
+                    t[k++] = rows[static_cast<std::size_t>(yy - y + 1) * n + static_cast<std::size_t>(xx) * 3 + static_cast<std::size_t>(c)];
+            std::nth_element(t, t + k / 2, t + k);
+            double m = t[k / 2];
+            if (k % 2 == 0) m = 0.5 * (m + *std::max_element(t, t + k / 2));  // mean of the middle two
+            return m;
+        };
+        if (y == 0 || y == h - 1 || w < 3) {
+            for (int x = 0; x < w; ++x)
+                for (int c = 0; c < 3; ++c) o[static_cast<std::size_t>(x) * 3 + static_cast<std::size_t>(c)] = put(edge(x, c));
+            return;
+        }
+        lo.resize(n), mid.resize(n), hi.resize(n);  // each column of 3, sorted
+        const double* up = &rows[0];
+        const double* here = &rows[n];
+        const double* down = &rows[2 * n];
+        for (std::size_t i = 0; i < n; ++i) {
+            const double a = std::min(up[i], here[i]), b = std::max(up[i], here[i]);
+            lo[i] = std::min(a, down[i]);
+            hi[i] = std::max(b, down[i]);
+            mid[i] = std::max(a, std::min(b, down[i]));
+        }
+        for (std::size_t i = 3; i + 3 < n; ++i) {
+            const double l = std::max(std::max(lo[i - 3], lo[i]), lo[i + 3]);
+            const double u = std::min(std::min(hi[i - 3], hi[i]), hi[i + 3]);
+            o[i] = put(median3(l, median3(mid[i - 3], mid[i], mid[i + 3]), u));
+        }
+        for (int c = 0; c < 3; ++c) {
+            o[c] = put(edge(0, c));
+            o[static_cast<std::size_t>(w - 1) * 3 + static_cast<std::size_t>(c)] = put(edge(w - 1, c));
+        }
     });
+}
+
+// The same over an image held whole (3 interleaved channels, w x h).
+inline void median3x3(const std::vector<double>& in, std::vector<double>& out, int w, int h, const executor& exec) {
+    const std::size_t n = static_cast<std::size_t>(w) * 3;
+    median3x3_rows([&](int y, double* row) { std::copy_n(&in[static_cast<std::size_t>(y) * n], n, row); }, out, w, h,
+                   exec);
 }
 
 }  // namespace detail
 
-// Frame-sized work arrays of the energy return, kept between frames.
+// Work arrays of the energy return, kept between frames. Frame-sized: the profile (and, in
+// return_energy_to_image, the excess); the rest is per node or per row.
 struct energy_scratch {
-    std::vector<double> profile, m, l, v, tmp;
-    std::vector<double> excess, shape, returned;  // return_energy_to_image
+    std::vector<float> profile;         // the shape's 3x3 median, full frame (float: half the
+                                        // memory; every sum is taken in double)
+    std::vector<double> xy, yx;         // the nodes' records, summed x first and y first
+    std::vector<double> factor;         // the nodes: the return's share of the profile, 3
+    detail::node_axis ax, ay;           // where the nodes are
+    std::vector<float> excess;          // return_energy_to_image (float, as the image)
     std::size_t bytes() const noexcept {
-        return (profile.capacity() + m.capacity() + l.capacity() + v.capacity() + tmp.capacity() +
-                excess.capacity() + shape.capacity() + returned.capacity()) *
-               sizeof(double);
+        return profile.capacity() * sizeof(float) +
+               (xy.capacity() + yx.capacity() + factor.capacity()) * sizeof(double) + excess.capacity() * sizeof(float);
     }
 };
 
-// The energy to add back per pixel and channel (3 interleaved channels, w x h), from the
-// removed excess `excess` (0 where nothing was removed) and the image whose 3x3 median shapes
-// the return, `shape` (3 channels, finite, >= 0). Writes `returned` (same layout). sigma: the
-// Gaussian's width in pixels.
-inline void energy_return(const std::vector<double>& excess, const std::vector<double>& shape, int w, int h,
-                          double sigma, std::vector<double>& returned, energy_scratch& s, const executor& exec) {
-    const std::size_t np = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
-    const std::vector<double> k = detail::gaussian_weights(sigma);
-    // the squared weights' kernel over the same support: V is then exact at every offset
-    // where M is not 0 (a lone firefly: V = |M|^2 everywhere)
-    const std::vector<double> k2 = detail::gaussian_weights(sigma / std::sqrt(2.0), static_cast<int>(k.size()) - 1);
-    // sum w_q^2 x_q = (S2 / S^2)^2 (G' * x) in 2-D, S and S2 the unnormalised 1-D sums of
-    // the two kernels (w = g / S, w^2 = g' / S^2 with g' the sigma / sqrt(2) kernel, = G' S2 / S^2).
-    double s1 = 0, s2 = 0;
-    for (std::size_t i = 0; i < k.size(); ++i) s1 += (i ? 2.0 : 1.0) * std::exp(-0.5 * double(i * i) / (sigma * sigma));
-    for (std::size_t i = 0; i < k2.size(); ++i) s2 += (i ? 2.0 : 1.0) * std::exp(-double(i * i) / (sigma * sigma));
-    const double scale = (s2 / (s1 * s1)) * (s2 / (s1 * s1));
-    detail::median3x3(shape, s.profile, w, h, exec);
-    s.m = excess;
-    s.l = s.profile;
-    s.v.resize(np);
-    for (std::size_t p = 0; p < np; ++p)
-        s.v[p] = excess[p * 3] * excess[p * 3] + excess[p * 3 + 1] * excess[p * 3 + 1] + excess[p * 3 + 2] * excess[p * 3 + 2];
-    detail::gaussian_blur(s.m, s.tmp, w, h, 3, k, exec);
-    detail::gaussian_blur(s.l, s.tmp, w, h, 3, k, exec);
-    detail::gaussian_blur(s.v, s.tmp, w, h, 1, k2, exec);
-    // The ratio is capped at 1: the return never exceeds the shape's own level. Where the
-    // removed light outweighs the rest the fireflies are no longer rare, the shape (a median
-    // of few noisy values) is mostly their noise, and scaling it up multiplies that noise
-    // (simulated dense fireflies at 4 samples a buffer: 2.4x the error of no return).
-    constexpr double max_ratio = 1.0;
-    returned.assign(np * 3, 0.0);
-    for (std::size_t p = 0; p < np; ++p) {
-        const double* m = &s.m[p * 3];
-        const double m2 = m[0] * m[0] + m[1] * m[1] + m[2] * m[2];
-        const double keep = m2 > 0 ? 1.0 - s.v[p] * scale / m2 : 0.0;
+namespace detail {
+
+// |e|^2 of one pixel's 3 channels, in double (written once: both orders square alike).
+template <class E>
+inline double squared(const E* e) noexcept {
+    const double a = e[0], b = e[1], c = e[2];
+    return a * a + b * b + c * c;
+}
+
+// The record of one node along a line of the model's inputs (e: excess, 3 channels; pr:
+// profile, 3; e2: the sums of |e|^2 of a line that is itself a sum, or null: |e|^2 of e's
+// pixels; has_e false: e is all 0 and not read). Every value is taken to double before it is
+// added. Opposite taps are added first: a mirrored line gives the mirrored result bit for bit.
+template <class E, class P>
+inline void line_sums(int p2, const tap_weights& tw, int n, const E* e, const P* pr, const double* e2, bool has_e,
+                      double* o) {
+    double m[3] = {}, l[3] = {}, v = 0;
+    auto sq = [&](std::size_t q) { return e2 ? e2[q] : squared(e + q * 3); };
+    auto E_ = [&](std::size_t q) { return static_cast<double>(e[q]); };
+    auto P_ = [&](std::size_t q) { return static_cast<double>(pr[q]); };
+    for (std::size_t d = 0; d < tw.w.size(); ++d) {
+        const tap_pair p = taps_at(p2, static_cast<int>(d), tw.half, n);
+        if (p.lo < 0 && p.hi < 0) continue;  // a node outside the frame: no centre pixel
+        const double wd = tw.w[d];
+        const std::size_t lo = static_cast<std::size_t>(p.lo), hi = static_cast<std::size_t>(p.hi);
+        if (d == 0 && !tw.half) {  // the centre tap: counted once
+            for (std::size_t c = 0; c < 3; ++c) {
+                l[c] += wd * P_(lo * 3 + c);
+                if (has_e) m[c] += wd * E_(lo * 3 + c);
+            }
+            if (has_e) v += tw.sq[d] * sq(lo);
+        } else if (p.lo >= 0 && p.hi >= 0) {
+            for (std::size_t c = 0; c < 3; ++c) {
+                l[c] += wd * (P_(lo * 3 + c) + P_(hi * 3 + c));
+                if (has_e) m[c] += wd * (E_(lo * 3 + c) + E_(hi * 3 + c));
+            }
+            if (has_e) v += tw.sq[d] * (sq(lo) + sq(hi));
+        } else {  // one side outside the frame: x + 0
+            const std::size_t q = p.lo >= 0 ? lo : hi;
+            for (std::size_t c = 0; c < 3; ++c) {
+                l[c] += wd * (P_(q * 3 + c) + 0.0);
+                if (has_e) m[c] += wd * (E_(q * 3 + c) + 0.0);
+            }
+            if (has_e) v += tw.sq[d] * (sq(q) + 0.0);
+        }
+    }
+    for (int c = 0; c < 3; ++c) {
+        o[c] = m[c];
+        o[3 + c] = l[c];
+    }
+    o[6] = v;
+    o[7] = 0.0;
+}
+
+// The sums along one axis at node p2 of a column of records (stride record values; `at(i)`
+// gives record i or null outside): the same arithmetic as line_sums, over records.
+template <class At>
+inline void record_sums(int p2, const tap_weights& tw, int n, At&& at, double* sum) {
+    for (int k = 0; k < record; ++k) sum[k] = 0.0;
+    for (std::size_t d = 0; d < tw.w.size(); ++d) {
+        const tap_pair p = taps_at(p2, static_cast<int>(d), tw.half, n);
+        if (p.lo < 0 && p.hi < 0) continue;
+        const double wk[record] = {tw.w[d], tw.w[d], tw.w[d], tw.w[d], tw.w[d], tw.w[d], tw.sq[d], 0.0};
+        const double* a = p.lo >= 0 ? at(p.lo) : nullptr;
+        const double* b = p.hi >= 0 ? at(p.hi) : nullptr;
+        if (d == 0 && !tw.half)  // the centre tap: counted once
+            for (int k = 0; k < record; ++k) sum[k] += wk[k] * a[k];
+        else if (a && b)
+            for (int k = 0; k < record; ++k) sum[k] += wk[k] * (a[k] + b[k]);
+        else  // one side outside the frame: x + 0, as in line_sums
+            for (int k = 0; k < record; ++k) sum[k] += wk[k] * ((a ? a : b)[k] + 0.0);
+    }
+}
+
+// x first, a band of node columns at a time: every row's records at the band's columns (a
+// row with no removed excess has M = V = 0 without a sum; the row's stretch under the band is
+// read once for all of them), then along y at the node rows. Nothing frame-sized.
+template <class E, class P>
+inline void energy_x_then_y(const std::vector<E>& excess, const std::vector<P>& profile, int w, int h,
+                            const node_axis& ax, const node_axis& ay, const tap_weights (&t)[2], energy_scratch& s,
+                            const executor& exec) {
+    const std::size_t nx = static_cast<std::size_t>(ax.count), hh = static_cast<std::size_t>(h);
+    std::vector<std::uint8_t> has_e(hh, 0);
+    exec.run(hh, [&](std::size_t y) {
+        const E* e = &excess[y * static_cast<std::size_t>(w) * 3];
+        for (std::size_t i = 0; i < static_cast<std::size_t>(w) * 3; ++i)
+            if (e[i] != E(0)) {
+                has_e[y] = 1;
+                break;
+            }
+    });
+    constexpr std::size_t band = 16;
+    s.xy.resize(static_cast<std::size_t>(ay.count) * nx * record);
+    exec.run((nx + band - 1) / band, [&](std::size_t bi) {
+        const std::size_t j0 = bi * band, j1 = std::min(nx, j0 + band);
+        thread_local std::vector<double> columns;  // per thread, kept (see median3x3_rows)
+        columns.resize((j1 - j0) * hh * record);
+        for (std::size_t y = 0; y < hh; ++y) {
+            const std::size_t at = y * static_cast<std::size_t>(w) * 3;
+            for (std::size_t j = j0; j < j1; ++j) {
+                const int p2 = ax.pos2(static_cast<int>(j));
+                line_sums(p2, t[(p2 & 1) != 0], w, &excess[at], &profile[at], nullptr, has_e[y] != 0,
+                          &columns[((j - j0) * hh + y) * record]);
+            }
+        }
+        for (std::size_t j = j0; j < j1; ++j) {
+            const double* column = &columns[(j - j0) * hh * record];
+            for (int i = 0; i < ay.count; ++i) {
+                const int q2 = ay.pos2(i);
+                record_sums(q2, t[(q2 & 1) != 0], h, [&](int y) { return column + static_cast<std::size_t>(y) * record; },
+                            &s.xy[(static_cast<std::size_t>(i) * nx + j) * record]);
+            }
+        }
+    });
+}
+
+// y first: at each node row, the sums along y for every column (whole rows at a time: it
+// vectorises), then along x at the node columns. With x first, the two orders a transposed
+// frame swaps.
+template <class E, class P>
+inline void energy_y_then_x(const std::vector<E>& excess, const std::vector<P>& profile, int w, int h,
+                            const node_axis& ax, const node_axis& ay, const tap_weights (&t)[2], energy_scratch& s,
+                            const executor& exec) {
+    const std::size_t nx = static_cast<std::size_t>(ax.count), row = nx * record;
+    const std::size_t n3 = static_cast<std::size_t>(w) * 3, n1 = static_cast<std::size_t>(w);
+    s.yx.resize(static_cast<std::size_t>(ay.count) * row);
+    exec.run(static_cast<std::size_t>(ay.count), [&](std::size_t i) {
+        const int p2 = ay.pos2(static_cast<int>(i));
+        const tap_weights& tw = t[(p2 & 1) != 0];
+        thread_local std::vector<double> m, l, v;  // per thread, kept (see median3x3_rows)
+        m.assign(n3, 0.0), l.assign(n3, 0.0), v.assign(n1, 0.0);
+        // one row of `src` (n3 values a row) into `dst`, weighted wd, in double
+        auto add = [&](std::vector<double>& dst, const auto& src, double wd, const tap_pair& p, bool centre) {
+            const auto* a = p.lo >= 0 ? &src[static_cast<std::size_t>(p.lo) * n3] : nullptr;
+            const auto* b = p.hi >= 0 ? &src[static_cast<std::size_t>(p.hi) * n3] : nullptr;
+            if (centre)
+                for (std::size_t q = 0; q < n3; ++q) dst[q] += wd * static_cast<double>(a[q]);
+            else if (a && b)
+                for (std::size_t q = 0; q < n3; ++q) dst[q] += wd * (static_cast<double>(a[q]) + static_cast<double>(b[q]));
+            else
+                for (std::size_t q = 0; q < n3; ++q) dst[q] += wd * (static_cast<double>((a ? a : b)[q]) + 0.0);
+        };
+        // the same for |e|^2, squared as it is read
+        auto add_sq = [&](double wd, const tap_pair& p, bool centre) {
+            const E* a = p.lo >= 0 ? &excess[static_cast<std::size_t>(p.lo) * n3] : nullptr;
+            const E* b = p.hi >= 0 ? &excess[static_cast<std::size_t>(p.hi) * n3] : nullptr;
+            if (centre)
+                for (std::size_t q = 0; q < n1; ++q) v[q] += wd * squared(a + q * 3);
+            else if (a && b)
+                for (std::size_t q = 0; q < n1; ++q) v[q] += wd * (squared(a + q * 3) + squared(b + q * 3));
+            else
+                for (std::size_t q = 0; q < n1; ++q) v[q] += wd * (squared((a ? a : b) + q * 3) + 0.0);
+        };
+        for (std::size_t d = 0; d < tw.w.size(); ++d) {
+            const tap_pair p = taps_at(p2, static_cast<int>(d), tw.half, h);
+            if (p.lo < 0 && p.hi < 0) continue;
+            const bool centre = d == 0 && !tw.half;
+            add(m, excess, tw.w[d], p, centre);
+            add(l, profile, tw.w[d], p, centre);
+            add_sq(tw.sq[d], p, centre);
+        }
+        for (int j = 0; j < ax.count; ++j) {
+            const int q2 = ax.pos2(j);
+            line_sums(q2, t[(q2 & 1) != 0], w, m.data(), l.data(), v.data(), true, &s.yx[i * row + static_cast<std::size_t>(j) * record]);
+        }
+    });
+}
+
+// The factor each node gives its channels, from the mean of the two orders' sums:
+//     keep min(M / L, 1),  keep = 1 - V / |M|^2 (0 unless > 1e-9)
+inline void energy_factors(energy_scratch& s, std::size_t nodes) {
+    s.factor.assign(nodes * 3, 0.0);
+    for (std::size_t n = 0; n < nodes; ++n) {
+        double r[record];
+        for (int k = 0; k < record; ++k) r[k] = 0.5 * (s.xy[n * record + k] + s.yx[n * record + k]);
+        const double m2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+        const double keep = m2 > 0 ? 1.0 - r[6] / m2 : 0.0;
         // a lone firefly gives keep = 0 up to rounding (1e-9: far above it, far below any
         // second firefly's share); nothing removed nearby gives m2 = 0
         if (!(keep > 1e-9) || !std::isfinite(m2)) continue;
+        // The ratio is capped at 1: the return never exceeds the shape's own level. Where the
+        // removed light outweighs the rest the fireflies are no longer rare, the shape (a
+        // median of few noisy values) is mostly their noise, and scaling it up multiplies that
+        // noise (simulated dense fireflies at 4 samples a buffer: 2.4x the error of no return).
         for (int c = 0; c < 3; ++c) {
-            const double l = s.l[p * 3 + static_cast<std::size_t>(c)];
-            const double add = l > 0 ? keep * std::min(m[c] / l, max_ratio) * s.profile[p * 3 + static_cast<std::size_t>(c)] : 0.0;
-            returned[p * 3 + static_cast<std::size_t>(c)] = std::isfinite(add) && add > 0 ? add : 0.0;
+            const double l = r[3 + c];
+            const double f = l > 0 ? keep * std::min(r[c] / l, 1.0) : 0.0;
+            s.factor[n * 3 + static_cast<std::size_t>(c)] = std::isfinite(f) && f > 0 ? f : 0.0;
         }
     }
+}
+
+// The node interval of pixel x and its weight on the upper node (exact: step is a power of 2).
+struct node_lerp {
+    int j = 0;
+    double t = 0.0;
+};
+inline node_lerp lerp_at(const node_axis& a, int x) noexcept {
+    if (a.count == 1) return {};
+    const int off = 2 * x - a.pos2(0);  // >= 0
+    const int j = std::min(off / (2 * a.step), a.count - 2);
+    return {j, static_cast<double>(2 * x - a.pos2(j)) / (2.0 * a.step)};
+}
+
+// Bilinear interpolation of the four nodes' values f00 (x0, y0), f01 (x1, y0), f10, f11, the
+// mean of the two orders (x first, y first): flips and transposes give the same bits.
+inline double bilinear(double f00, double f01, double f10, double f11, double tx, double ty) noexcept {
+    const double xy = (1.0 - ty) * ((1.0 - tx) * f00 + tx * f01) + ty * ((1.0 - tx) * f10 + tx * f11);
+    const double yx = (1.0 - tx) * ((1.0 - ty) * f00 + ty * f10) + tx * ((1.0 - ty) * f01 + ty * f11);
+    return 0.5 * (xy + yx);
+}
+
+}  // namespace detail
+
+// The model of the energy return for one frame, from the removed excess `excess` (3
+// interleaved channels, w x h, 0 where nothing was removed) and the image whose 3x3 median
+// shapes the return (3 channels, finite, >= 0; row y written by shape_rows(y, out), or held
+// whole: energy_model): the profile and the nodes' factors in `s`, read back per pixel by
+// energy_at. sigma: the Gaussian's width in pixels.
+template <class E, class ShapeRows>
+inline void energy_model_rows(const std::vector<E>& excess, ShapeRows&& shape_rows, int w, int h, double sigma,
+                              energy_scratch& s, const executor& exec) {
+    const int r = std::max(1, static_cast<int>(std::ceil(3.0 * sigma)));
+    const detail::tap_weights taps[2] = {detail::make_taps(sigma, r, false), detail::make_taps(sigma, r, true)};
+    const int step = detail::node_step(sigma);
+    s.ax = detail::make_node_axis(w, step);
+    s.ay = detail::make_node_axis(h, step);
+    detail::median3x3_rows(shape_rows, s.profile, w, h, exec);
+    detail::energy_x_then_y(excess, s.profile, w, h, s.ax, s.ay, taps, s, exec);
+    detail::energy_y_then_x(excess, s.profile, w, h, s.ax, s.ay, taps, s, exec);
+    detail::energy_factors(s, static_cast<std::size_t>(s.ay.count) * static_cast<std::size_t>(s.ax.count));
+}
+
+inline void energy_model(const std::vector<double>& excess, const std::vector<double>& shape, int w, int h,
+                         double sigma, energy_scratch& s, const executor& exec) {
+    const std::size_t n = static_cast<std::size_t>(w) * 3;
+    energy_model_rows(excess, [&](int y, double* row) { std::copy_n(&shape[static_cast<std::size_t>(y) * n], n, row); },
+                      w, h, sigma, s, exec);
+}
+
+// The energy to add back at pixel (x, y), channels 0..2 into add[0..2], after energy_model.
+inline void energy_at(const energy_scratch& s, int x, int y, double* add) noexcept {
+    const std::size_t nx = static_cast<std::size_t>(s.ax.count);
+    const detail::node_lerp ly = detail::lerp_at(s.ay, y), lx = detail::lerp_at(s.ax, x);
+    const std::size_t i0 = static_cast<std::size_t>(ly.j), i1 = s.ay.count > 1 ? i0 + 1 : i0;
+    const std::size_t j0 = static_cast<std::size_t>(lx.j), j1 = s.ax.count > 1 ? j0 + 1 : j0;
+    const std::size_t p = (static_cast<std::size_t>(y) * static_cast<std::size_t>(s.ax.pixels) + static_cast<std::size_t>(x)) * 3;
+    for (std::size_t c = 0; c < 3; ++c) {
+        const double* f = s.factor.data() + c;
+        const double k = detail::bilinear(f[(i0 * nx + j0) * 3], f[(i0 * nx + j1) * 3], f[(i1 * nx + j0) * 3],
+                                          f[(i1 * nx + j1) * 3], lx.t, ly.t);
+        const double v = k > 0 ? k * static_cast<double>(s.profile[p + c]) : 0.0;
+        add[c] = std::isfinite(v) && v > 0 ? v : 0.0;
+    }
+}
+
+// The whole return as an image (3 interleaved channels, w x h) in `returned`.
+inline void energy_return(const std::vector<double>& excess, const std::vector<double>& shape, int w, int h,
+                          double sigma, std::vector<double>& returned, energy_scratch& s, const executor& exec) {
+    energy_model(excess, shape, w, h, sigma, s, exec);
+    returned.resize(static_cast<std::size_t>(w) * static_cast<std::size_t>(h) * 3);
+    exec.run(static_cast<std::size_t>(h), [&](std::size_t y) {
+        for (int x = 0; x < w; ++x)
+            energy_at(s, x, static_cast<int>(y), &returned[(y * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)) * 3]);
+    });
 }
 
 // What one cleaned image gave and got back.
@@ -212,48 +472,80 @@ struct energy_totals {
     double removed = 0, returned = 0;  // sums over pixels of the mean colour channel
 };
 
+// Adds add[0..2] to the first three channels of pixel (x, y), keeping the old values in
+// old[0..2]. False when a sum did not fit the image's own type (past FLT_MAX, or half's
+// 65504): the caller restores the pixel (restore_light).
+template <class C>
+bool add_light(const image_view<C>& color, int x, int y, const double* add, double* old) {
+    bool finite = true;
+    for (int c = 0; c < 3; ++c) {
+        old[c] = color.load(x, y, c);
+        if (!(add[c] > 0)) continue;  // nothing to add: the bits stay as they are
+        color.store(x, y, c, old[c] + add[c]);
+        finite = finite && std::isfinite(color.load(x, y, c));
+    }
+    return finite;
+}
+
+template <class C>
+void restore_light(const image_view<C>& color, int x, int y, const double* old, const double* add) {
+    for (int c = 0; c < 3; ++c)
+        if (add[c] > 0) color.store(x, y, c, old[c]);
+}
+
 // The energy return on one cleaned image (the first three channels of `color`): pixel
 // rebuilt[e] held before[3 e .. 3 e + 2] before it was rebuilt. The return is added where it
 // exceeds the pixel's standard error, sqrt(variance_scale x the mean of its variance
-// channels), and never where keep[p] is false (black background, alpha 0).
+// channels), and never where keep[p] is false (black background, alpha 0). added (when not
+// null, one per pixel): set to 1 where light was added, else left as it was.
 template <class C, class V>
 energy_totals return_energy_to_image(const image_view<C>& color, const image_view<V>& variance, double variance_scale,
                                      const std::uint32_t* rebuilt, const float* before, std::size_t n,
-                                     const std::uint8_t* keep, double sigma, energy_scratch& s, const executor& exec) {
+                                     const std::uint8_t* keep, double sigma, energy_scratch& s, const executor& exec,
+                                     std::uint8_t* added = nullptr) {
     energy_totals t;
     const int w = color.width(), h = color.height();
     if (color.channels() < 3) return t;
     const std::size_t np = color.pixel_count();
-    s.excess.assign(np * 3, 0.0);
+    s.excess.assign(np * 3, 0.0f);
     for (std::size_t e = 0; e < n; ++e) {
         const int x = static_cast<int>(rebuilt[e] % static_cast<std::uint32_t>(w));
         const int y = static_cast<int>(rebuilt[e] / static_cast<std::uint32_t>(w));
         for (int c = 0; c < 3; ++c) {
             const double d = static_cast<double>(before[e * 3 + static_cast<std::size_t>(c)]) - color.load(x, y, c);
-            s.excess[static_cast<std::size_t>(rebuilt[e]) * 3 + static_cast<std::size_t>(c)] = std::isfinite(d) && d > 0 ? d : 0.0;
+            s.excess[static_cast<std::size_t>(rebuilt[e]) * 3 + static_cast<std::size_t>(c)] =
+                std::isfinite(d) && d > 0 ? static_cast<float>(std::min(d, static_cast<double>(FLT_MAX))) : 0.0f;
         }
     }
-    s.shape.resize(np * 3);
-    for (int y = 0; y < h; ++y)
+    // the shape: the image before the rebuild (the cleaned image plus what was removed)
+    auto shape_row = [&](int y, double* row) {
         for (int x = 0; x < w; ++x)
             for (int c = 0; c < 3; ++c) {
                 const std::size_t i = (static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)) * 3 + static_cast<std::size_t>(c);
-                const double v = color.load(x, y, c) + s.excess[i];
-                s.shape[i] = std::isfinite(v) && v > 0 ? v : 0.0;
+                const double v = color.load(x, y, c) + static_cast<double>(s.excess[i]);
+                row[static_cast<std::size_t>(x) * 3 + static_cast<std::size_t>(c)] = std::isfinite(v) && v > 0 ? v : 0.0;
             }
-    energy_return(s.excess, s.shape, w, h, sigma, s.returned, s, exec);
+    };
+    energy_model_rows(s.excess, shape_row, w, h, sigma, s, exec);
     const int nv = variance.channels() == 1 ? 1 : 3;
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
             const std::size_t p = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
-            const double* add = &s.returned[p * 3];
-            t.removed += (s.excess[p * 3] + s.excess[p * 3 + 1] + s.excess[p * 3 + 2]) / 3.0;
+            double add[3];
+            energy_at(s, x, y, add);
+            t.removed += (static_cast<double>(s.excess[p * 3]) + s.excess[p * 3 + 1] + s.excess[p * 3 + 2]) / 3.0;
+            const double mean_add = (add[0] + add[1] + add[2]) / 3.0;
+            if (!keep[p] || !(mean_add > 0)) continue;
             double var = 0;
             for (int c = 0; c < nv; ++c) var += std::max(static_cast<double>(variance.load(x, y, c)), 0.0) / nv;
-            const double mean_add = (add[0] + add[1] + add[2]) / 3.0;
-            if (!keep[p] || !(mean_add > std::sqrt(variance_scale * var))) continue;
-            for (int c = 0; c < 3; ++c) color.store(x, y, c, color.load(x, y, c) + add[c]);
+            if (!(mean_add > std::sqrt(variance_scale * var))) continue;
+            double old[3];
+            if (!add_light(color, x, y, add, old)) {
+                restore_light(color, x, y, old, add);
+                continue;
+            }
             t.returned += mean_add;
+            if (added) added[p] = 1;
         }
     return t;
 }

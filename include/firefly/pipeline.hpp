@@ -11,6 +11,8 @@
 //                 pixel, blended with the spatial estimate where that lowers the frame's
 //                 expected error (cross_half.hpp)
 //   per half      two-phase spatial reconstruction of what is bad in both halves, in place
+//   per half      the removed fireflies' energy given back where many agree on it
+//                 (energy.hpp; return_energy)
 //
 // Stages run as tasks on the executor; each writes disjoint memory, every cross-half value
 // is computed before any is written, and the lambda cache is filled between the parallel
@@ -82,9 +84,10 @@ struct detector_options {
     bool blend_spatial = true;          // other_half: blend in the spatial estimate (false:
                                         // the other half's value alone)
     bool reconstruct = true;            // false: detect and report only, change nothing
-    bool return_energy = false;         // give back the rebuilt fireflies' energy where many
-                                        // agree on it (energy.hpp; changes pixels near
-                                        // dense fireflies, never lowers any)
+    bool return_energy = true;          // give back the rebuilt fireflies' energy where many
+                                        // agree on it (energy.hpp; adds light to pixels near
+                                        // dense fireflies, never lowers any; false: the
+                                        // paper's removal alone)
     double energy_sigma = 8.0;          // its Gaussian's width in pixels (1 to 64)
 };
 
@@ -118,6 +121,8 @@ inline constexpr std::uint8_t consistent = 8; // outlier in one half, but within
 inline constexpr std::uint8_t other_half = 16;// rebuilt from the other half's value at this
                                               // pixel (with firefly or nonfinite): the halves
                                               // are correlated here
+inline constexpr std::uint8_t energy = 32;    // light added by the energy return (energy.hpp):
+                                              // the removed fireflies' energy given back
 }  // namespace mask_bits
 
 struct half_report {
@@ -209,7 +214,7 @@ public:
                  h.removed.capacity() * sizeof(double) + h.keys.capacity() * sizeof(std::uint64_t) +
                  (h.fix.capacity() + h.cross.capacity()) * sizeof(std::uint32_t) +
                  h.cross_values.capacity() * sizeof(double) + h.decision.capacity() +
-                 h.band_counts.capacity() * sizeof(stddev_counts) + h.before.capacity() * sizeof(float) +
+                 h.band_counts.capacity() * sizeof(stddev_counts) + h.before.capacity() * sizeof(float) + h.added.capacity() +
                  h.energy.bytes() + h.recon.bytes();
         return n;
     }
@@ -262,6 +267,7 @@ private:
                                              // firefly, for the frame's decision; NaN: not one
         std::vector<stddev_counts> band_counts;  // the standard-deviation pass per row band
         std::vector<float> before;           // return_energy: colour of the pixels to rebuild
+        std::vector<std::uint8_t> added;     // return_energy with a mask: light added here
         energy_scratch energy;
         reconstruct_scratch recon;
     };
@@ -317,7 +323,7 @@ private:
         if (energy) exec_.run(2, [&](std::size_t h) { keep_before(*hb[h], halves_[h]); });
         exec_.run(2, [&](std::size_t h) { finish(*hb[h], halves_[h], *masks[h], rep.half[h], clean, cross); });
         if (energy)
-            for (int h = 0; h < 2; ++h) give_energy_back(*hb[h], halves_[h], rep.half[h], rep.variance_calibration);
+            for (int h = 0; h < 2; ++h) give_energy_back(*hb[h], halves_[h], *masks[h], rep.half[h], rep.variance_calibration);
         clock.lap(frame_report::rebuild);
         for (const half_report& hr : rep.half)
             if (!hr.reconstruction.ok()) rep.error = hr.reconstruction;
@@ -849,19 +855,26 @@ private:
     }
 
     // return_energy: energy.hpp on the cleaned half; never onto ignored (black, alpha 0) or
-    // non-finite pixels.
+    // non-finite pixels. The pixels it adds light to get mask_bits::energy.
     template <class C, class V, class A>
-    void give_energy_back(const half_buffer<C, V, A>& hb, half_state& s, half_report& r, double calibration) {
+    void give_energy_back(const half_buffer<C, V, A>& hb, half_state& s, const image_view<std::uint8_t>& mask,
+                          half_report& r, double calibration) {
         if constexpr (!std::is_const_v<C>) {
             s.decision.resize(s.label.size());
             for (std::size_t i = 0; i < s.label.size(); ++i) s.decision[i] = cls(s.label[i]) == valid_class;
+            s.added.assign(mask.empty() ? 0 : s.label.size(), 0);
             const energy_totals t = return_energy_to_image(hb.color, hb.variance, calibration, s.fix.data(),
                                                            s.before.data(), s.fix.size(), s.decision.data(),
-                                                           options_.energy_sigma, s.energy, exec_);
+                                                           options_.energy_sigma, s.energy, exec_,
+                                                           mask.empty() ? nullptr : s.added.data());
             r.energy_removed = t.removed;
             r.energy_returned = t.returned;
+            const int w = mask.width();
+            for (int y = 0; y < mask.height(); ++y)
+                for (int x = 0; x < w; ++x)
+                    if (s.added[index(x, y, w)]) mask(x, y) = static_cast<std::uint8_t>(mask(x, y) | mask_bits::energy);
         } else {
-            (void)hb, (void)s, (void)r, (void)calibration;
+            (void)hb, (void)s, (void)mask, (void)r, (void)calibration;
         }
     }
 

@@ -76,10 +76,10 @@ def test_masks(processed):
     assert np.count_nonzero(b & firefly.MASK_HIGHLIGHT) == rep.half[1].highlights
     assert np.count_nonzero(a & firefly.MASK_CONSISTENT) == rep.half[0].consistent
     assert np.count_nonzero(a & firefly.MASK_OTHER_HALF) == rep.half[0].from_other_half
-    assert np.all(a < 32) and np.all(b < 32)  # every pixel written (they started at 255)
+    assert np.all(a < 64) and np.all(b < 64)  # every pixel written (they started at 255)
     bits = [firefly.MASK_FIREFLY, firefly.MASK_HIGHLIGHT, firefly.MASK_NONFINITE, firefly.MASK_CONSISTENT,
-            firefly.MASK_OTHER_HALF]
-    assert bits == [1, 2, 4, 8, 16]
+            firefly.MASK_OTHER_HALF, firefly.MASK_ENERGY]
+    assert bits == [1, 2, 4, 8, 16, 32]
 
 
 def test_options_round_trip():
@@ -125,7 +125,10 @@ def test_float64_frame():
     assert rep.half[0].fireflies >= len(frame["fireflies"])
     changed = np.any(arrays["a_color"] != before, axis=-1)
     assert all(changed[p] for p in frame["fireflies"])
-    assert np.count_nonzero(changed) == rep.half[0].fireflies  # nothing else touched
+    # nothing else lowered: other changes are the light the energy return gives back
+    lowered = np.any(arrays["a_color"] < before, axis=-1)
+    assert np.count_nonzero(lowered) == rep.half[0].fireflies
+    assert np.all(arrays["a_color"][changed & ~lowered] >= before[changed & ~lowered])
 
 
 def test_version():

@@ -1,17 +1,24 @@
 // firefly/sim: accuracy of a cleaned frame against the simulator's ground truth. Works for
-// any method (firefly or a peer): "changed" is read off the pixels themselves.
+// any method (firefly or a peer): what a method did is read off the pixels themselves.
 //
-//   recall             visible firefly hits changed / visible firefly hits, per half. Visible:
+// A pixel (in one half) is "changed" when any bit of its colour changed, and "lowered" when it
+// changed and some channel is now below the input (or the input was not finite). The detection
+// counts are of lowered pixels: removing a firefly lowers its pixel, while giving removed
+// energy back (energy.hpp) only adds light, which is a change of the estimate and not a
+// detection; what it does to the image is in relmse, made_worse and energy.
+//
+//   recall             visible firefly hits lowered / visible firefly hits, per half. Visible:
 //                      the firefly energy adds more than 10x the pixel's expected value without
 //                      fireflies (with them, no firefly could be visible on a dense frame, where
 //                      fireflies bring most of the expected energy).
-//   precision          changed pixels that got a firefly or a non-finite sample / changed
-//   false_positive     changed pixels with no firefly and not a highlight / all such pixels
-//   highlight_kept     highlight pixels unchanged in every half without a firefly or a
-//                      non-finite sample there / highlight pixels (a firefly on a highlight
-//                      is the method's to remove: its half may change)
+//   precision          lowered pixels that got a firefly or a non-finite sample / lowered
+//   false_positive     lowered pixels with no firefly and not a highlight / all such pixels
+//   highlight_kept     highlight pixels lowered in no half without a firefly or a non-finite
+//                      sample there / highlight pixels (a firefly on a highlight is the
+//                      method's to remove: its half may change)
 //   relmse             mean over pixels and channels of (x - ref)^2 / (ref^2 + 0.01) for the
 //                      combined image (A + B) / 2 against the expected radiance
+//   changed            changed pixels (pixel x half)
 //   made_worse         changed pixels (pixel x half) whose squared error against the expected
 //                      radiance grew (a non-finite input counts as an infinite error)
 //   energy             mean brightness of the combined image / the expected image's, over all
@@ -42,6 +49,7 @@ struct accuracy {
     double relmse = 0.0;
     std::size_t visible = 0;   // visible firefly hits (pixel x half)
     std::size_t changed = 0;   // changed pixels (pixel x half)
+    std::size_t lowered = 0;   // of those, lowered in some channel (or non-finite before)
     std::size_t made_worse = 0;  // changed pixels (pixel x half) now further from the expected
     double energy = 1.0;            // combined mean / expected mean
     double energy_highlight = 1.0;  // the same over highlight pixels
@@ -123,40 +131,44 @@ template <class Truth, class Orig, class Clean>
 accuracy evaluate_counts(const Truth& t, int k, Orig orig, Clean clean) {
     accuracy a;
     const std::size_t np = t.pixels();
-    std::size_t vis_hit = 0, changed_true = 0, clean_px = 0, clean_changed = 0, hl = 0, hl_kept = 0;
+    std::size_t vis_hit = 0, lowered_true = 0, clean_px = 0, clean_lowered = 0, hl = 0, hl_kept = 0;
     for (std::size_t i = 0; i < np; ++i) {
         const float* ex = &t.expected[i * 3];
         const double expected = t.expected_without_fireflies(i);
         const bool is_hl = !t.highlight.empty() && t.highlight[i];
-        bool clean_changed_here = false;  // a half without a firefly or NaN here changed
+        bool clean_lowered_here = false;  // a half without a firefly or NaN here lowered
         for (int b = 0; b < k; ++b) {
             const float* o = &(*orig(b))[i * 3];
             const float* c = &(*clean(b))[i * 3];
             const bool changed = std::memcmp(o, c, 12) != 0;
+            const bool lowered = changed && !(c[0] >= o[0] && c[1] >= o[1] && c[2] >= o[2]);
             const bool hit = t.firefly(b, i) > 0 || t.bad(b, i);
-            clean_changed_here = clean_changed_here || (changed && !hit);
+            clean_lowered_here = clean_lowered_here || (lowered && !hit);
             if (t.firefly(b, i) > 0 && t.firefly(b, i) > 10.0 * std::fabs(expected)) {
                 ++a.visible;
-                vis_hit += changed ? 1 : 0;
+                vis_hit += lowered ? 1 : 0;
             }
             if (changed) {
                 ++a.changed;
-                changed_true += hit ? 1 : 0;
                 a.made_worse += pixel_error(c, ex) > pixel_error(o, ex) ? 1 : 0;
+            }
+            if (lowered) {
+                ++a.lowered;
+                lowered_true += hit ? 1 : 0;
             }
             if (!hit && !is_hl) {
                 ++clean_px;
-                clean_changed += changed ? 1 : 0;
+                clean_lowered += lowered ? 1 : 0;
             }
         }
         if (is_hl) {
             ++hl;
-            hl_kept += clean_changed_here ? 0 : 1;
+            hl_kept += clean_lowered_here ? 0 : 1;
         }
     }
     a.recall = a.visible ? static_cast<double>(vis_hit) / static_cast<double>(a.visible) : 1.0;
-    a.precision = a.changed ? static_cast<double>(changed_true) / static_cast<double>(a.changed) : 1.0;
-    a.false_positive = clean_px ? static_cast<double>(clean_changed) / static_cast<double>(clean_px) : 0.0;
+    a.precision = a.lowered ? static_cast<double>(lowered_true) / static_cast<double>(a.lowered) : 1.0;
+    a.false_positive = clean_px ? static_cast<double>(clean_lowered) / static_cast<double>(clean_px) : 0.0;
     a.highlight_kept = hl ? static_cast<double>(hl_kept) / static_cast<double>(hl) : 1.0;
     return a;
 }
