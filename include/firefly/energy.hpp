@@ -129,49 +129,55 @@ inline void median3x3_rows(FillRow&& fill_row, std::vector<T>& out, int w, int h
     auto put = [](double v) { return static_cast<T>(std::min(v, static_cast<double>(std::numeric_limits<T>::max()))); };
     const std::size_t n = static_cast<std::size_t>(w) * 3;
     out.resize(n * static_cast<std::size_t>(h));
-    exec.run(static_cast<std::size_t>(h), [&](std::size_t row) {
-        const int y = static_cast<int>(row);
-        // rows y - 1, y, y + 1 (per thread, kept: a row's allocation freed and taken again
-        // costs page faults when the allocator returns it to the system)
-        thread_local std::vector<double> rows, lo, mid, hi;
-        rows.resize(3 * n);
-        const int y0 = std::max(0, y - 1), y1 = std::min(h - 1, y + 1);
-        for (int yy = y0; yy <= y1; ++yy) fill_row(yy, &rows[static_cast<std::size_t>(yy - y + 1) * n]);
-        T* o = &out[row * n];
-        auto edge = [&](int x, int c) {
-            double t[9] = {};
-            int k = 0;
-            for (int yy = y0; yy <= y1; ++yy)
-                for (int xx = std::max(0, x - 1); xx <= std::min(w - 1, x + 1); ++xx)
-                    t[k++] = rows[static_cast<std::size_t>(yy - y + 1) * n + static_cast<std::size_t>(xx) * 3 + static_cast<std::size_t>(c)];
-            std::nth_element(t, t + k / 2, t + k);
-            double m = t[k / 2];
-            if (k % 2 == 0) m = 0.5 * (m + *std::max_element(t, t + k / 2));  // mean of the middle two
-            return m;
-        };
-        if (y == 0 || y == h - 1 || w < 3) {
-            for (int x = 0; x < w; ++x)
-                for (int c = 0; c < 3; ++c) o[static_cast<std::size_t>(x) * 3 + static_cast<std::size_t>(c)] = put(edge(x, c));
-            return;
-        }
-        lo.resize(n), mid.resize(n), hi.resize(n);  // each column of 3, sorted
-        const double* up = &rows[0];
-        const double* here = &rows[n];
-        const double* down = &rows[2 * n];
-        for (std::size_t i = 0; i < n; ++i) {
-            const double a = std::min(up[i], here[i]), b = std::max(up[i], here[i]);
-            lo[i] = std::min(a, down[i]);
-            hi[i] = std::max(b, down[i]);
-            mid[i] = std::max(a, std::min(b, down[i]));
-        }
-        for (std::size_t i = 3; i + 3 < n; ++i) {
-            const double l = std::max(std::max(lo[i - 3], lo[i]), lo[i + 3]);
-            const double u = std::min(std::min(hi[i - 3], hi[i]), hi[i + 3]);
-            o[i] = put(median3(l, median3(mid[i - 3], mid[i], mid[i + 3]), u));
-        }
-        for (int c = 0; c < 3; ++c) {
-            o[c] = put(edge(0, c));
-            o[static_cast<std::size_t>(w - 1) * 3 + static_cast<std::size_t>(c)] = put(edge(w - 1, c));
+    // Bands of rows as tasks; in a band each input row is made once, into a ring of three
+    // (per thread, kept: a row's allocation freed and taken again costs page faults when the
+    // allocator returns it to the system).
+    constexpr int band = 16;
+    exec.run(static_cast<std::size_t>((h + band - 1) / band), [&](std::size_t bi) {
+        thread_local std::vector<double> ring, lo, mid, hi;
+        ring.resize(3 * n);
+        auto line = [&](int yy) { return &ring[static_cast<std::size_t>(yy % 3) * n]; };
+        const int first = static_cast<int>(bi) * band, last = std::min(h, first + band);
+        for (int yy = std::max(0, first - 1); yy <= std::min(h - 1, first); ++yy) fill_row(yy, line(yy));
+        for (int y = first; y < last; ++y) {
+            if (y + 1 < h) fill_row(y + 1, line(y + 1));
+            const int y0 = std::max(0, y - 1), y1 = std::min(h - 1, y + 1);
+            T* o = &out[static_cast<std::size_t>(y) * n];
+            auto edge = [&](int x, int c) {
+                double t[9] = {};
+                int k = 0;
+                for (int yy = y0; yy <= y1; ++yy)
+                    for (int xx = std::max(0, x - 1); xx <= std::min(w - 1, x + 1); ++xx)
+                        t[k++] = line(yy)[static_cast<std::size_t>(xx) * 3 + static_cast<std::size_t>(c)];
+                std::nth_element(t, t + k / 2, t + k);
+                double m = t[k / 2];
+                if (k % 2 == 0) m = 0.5 * (m + *std::max_element(t, t + k / 2));  // mean of the middle two
+                return m;
+            };
+            if (y == 0 || y == h - 1 || w < 3) {
+                for (int x = 0; x < w; ++x)
+                    for (int c = 0; c < 3; ++c) o[static_cast<std::size_t>(x) * 3 + static_cast<std::size_t>(c)] = put(edge(x, c));
+                continue;
+            }
+            lo.resize(n), mid.resize(n), hi.resize(n);  // each column of 3, sorted
+            const double* up = line(y - 1);
+            const double* here = line(y);
+            const double* down = line(y + 1);
+            for (std::size_t i = 0; i < n; ++i) {
+                const double a = std::min(up[i], here[i]), b = std::max(up[i], here[i]);
+                lo[i] = std::min(a, down[i]);
+                hi[i] = std::max(b, down[i]);
+                mid[i] = std::max(a, std::min(b, down[i]));
+            }
+            for (std::size_t i = 3; i + 3 < n; ++i) {
+                const double l = std::max(std::max(lo[i - 3], lo[i]), lo[i + 3]);
+                const double u = std::min(std::min(hi[i - 3], hi[i]), hi[i + 3]);
+                o[i] = put(median3(l, median3(mid[i - 3], mid[i], mid[i + 3]), u));
+            }
+            for (int c = 0; c < 3; ++c) {
+                o[c] = put(edge(0, c));
+                o[static_cast<std::size_t>(w - 1) * 3 + static_cast<std::size_t>(c)] = put(edge(w - 1, c));
+            }
         }
     });
 }
