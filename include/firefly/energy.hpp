@@ -51,9 +51,8 @@ namespace detail {
 // at or after pixel n - 1. Positions are kept doubled (pos2 = 2 x), so a node between two
 // pixels (half-integer) is exact.
 struct node_axis {
-    int count = 1, step = 1;
+    int pixels = 1, count = 1, step = 1;
     int pos2(int j) const noexcept { return (pixels - 1) + (2 * j - (count - 1)) * step; }
-    int pixels = 1;
 };
 
 inline node_axis make_node_axis(int pixels, int step) {
@@ -537,11 +536,12 @@ energy_totals return_energy_to_image(const image_view<C>& color, const image_vie
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
             const std::size_t p = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+            t.removed += (static_cast<double>(s.excess[p * 3]) + s.excess[p * 3 + 1] + s.excess[p * 3 + 2]) / 3.0;
+            if (!keep[p]) continue;
             double add[3];
             energy_at(s, x, y, add);
-            t.removed += (static_cast<double>(s.excess[p * 3]) + s.excess[p * 3 + 1] + s.excess[p * 3 + 2]) / 3.0;
             const double mean_add = (add[0] + add[1] + add[2]) / 3.0;
-            if (!keep[p] || !(mean_add > 0)) continue;
+            if (!(mean_add > 0)) continue;
             double var = 0;
             for (int c = 0; c < nv; ++c) var += std::max(static_cast<double>(variance.load(x, y, c)), 0.0) / nv;
             if (!(mean_add > std::sqrt(variance_scale * var))) continue;
