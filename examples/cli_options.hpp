@@ -241,6 +241,13 @@ inline void add_detector_options(CLI::App& app, options& c) {
         ->type_name("X")
         ->check(number_in(1, 64, false, false, "a number from 1 to 64"))
         ->group("detector (every mode)");
+    app.add_option_function<double>("--energy-coarse-sigma",
+                                    [&c](double v) { c.o.energy_coarse_sigma = c.x.energy_coarse_sigma = v; },
+                                    "width in pixels of the energy return's wider scale, used where sparse fireflies "
+                                    "agree with it (0: none; not above --energy-sigma: none)")
+        ->type_name("X")
+        ->check(number_in(0, 0, false, false, "0") | number_in(2, 256, false, false, "a number from 2 to 256"))
+        ->group("detector (every mode)");
     app.add_option("--bound", o.bound_threshold, "modified Z-score threshold")->type_name("X")->check(number_in(0, 1e30, false, false, "a number >= 0"))->group(g);
     add_choice(app, "--reduction", o.reduction,
                std::map<std::string, firefly::variance_reduction>{{"mean", firefly::variance_reduction::mean},

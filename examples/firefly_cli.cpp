@@ -613,6 +613,7 @@ json options_json(const options& c) {
         j["use_variance"] = c.x.use_variance;
         j["return_energy"] = c.x.return_energy;
         j["energy_sigma"] = c.x.energy_sigma;
+        j["energy_coarse_sigma"] = c.x.energy_coarse_sigma;
         j["threads"] = c.threads;
         return j;
     }
@@ -632,6 +633,7 @@ json options_json(const options& c) {
                   {"iterations", o.reconstruction.max_iterations},
                   {"return_energy", o.return_energy},
                   {"energy_sigma", o.energy_sigma},
+                  {"energy_coarse_sigma", o.energy_coarse_sigma},
                   {"threads", c.threads}});
     return j;
 }

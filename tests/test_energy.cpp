@@ -40,11 +40,20 @@ TEST_CASE("energy return: extreme and denormal excess stays finite and non-negat
     const std::size_t n = static_cast<std::size_t>(w * h) * 3;
     std::vector<double> shape(n, 1e-3), excess(n, 0.0), returned;
     for (int i = 0; i < 40; ++i) excess[static_cast<std::size_t>(i * 7) % n] = i % 2 ? 1e30 : 4.9e-324;
+    shape[5] = 4.9e-324;  // a denormal level under a 1e30 excess: a huge relative excess
     energy_scratch s;
-    energy_return(excess, shape, w, h, 8.0, returned, s, executor{});
-    for (const double v : returned) {
-        CHECK(std::isfinite(v));
-        CHECK(v >= 0.0);
+    for (const energy_scales sc : {energy_scales(8.0), energy_scales(8.0, 32.0), energy_scales(1.0, 256.0)}) {
+        energy_return(excess, shape, w, h, sc, returned, s, executor{});
+        for (const double v : returned) {
+            CHECK(std::isfinite(v));
+            CHECK(v >= 0.0);
+        }
+    }
+    // a 1x1 frame and a single row, both scales
+    for (const int ww : {1, 37}) {
+        std::vector<double> one_excess(static_cast<std::size_t>(ww) * 3, 1e30), one_shape(static_cast<std::size_t>(ww) * 3, 1.0);
+        energy_return(one_excess, one_shape, ww, 1, energy_scales(8.0, 32.0), returned, s, executor{});
+        for (const double v : returned) CHECK((std::isfinite(v) && v >= 0.0));
     }
 }
 
@@ -148,7 +157,7 @@ TEST_CASE("energy return: exact at the nodes, close between them", "[energy]") {
 }
 
 TEST_CASE("energy return: flipped and transposed frames give the same bits", "[energy][invariant]") {
-    for (const double sigma : {3.0, 8.0})
+    for (const energy_scales sigma : {energy_scales(3.0), energy_scales(8.0), energy_scales(3.0, 12.0), energy_scales(2.0, 7.0)})
         for (const int w : {37, 38}) {
             const int h = 23;
             const energy_case e(w, h, 9);
@@ -178,7 +187,7 @@ TEST_CASE("energy return: flipped and transposed frames give the same bits", "[e
                     for (int x = 0; x < W; ++x)
                         for (std::size_t c = 0; c < 3; ++c)
                             differ += std::memcmp(&out[static_cast<std::size_t>(y * W + x) * 3 + c], &ref[src(x, y) + c], 8) != 0;
-                INFO("sigma " << sigma << ", w " << w << ", symmetry " << sym);
+                INFO("sigma " << sigma.fine << " / " << sigma.coarse << ", w " << w << ", symmetry " << sym);
                 CHECK(differ == 0);
             }
         }
@@ -198,7 +207,7 @@ TEST_CASE("two halves, return_energy: only adds, never to the background, lowers
           "[energy][pipeline]") {
     for (const char* name : {"caustics", "black_alpha", "dense10"}) {
         INFO(name);
-        const sim::frame f = sim::simulate(sim::named_scene(name, 160, 120, 3));
+        const sim::frame f = sim::simulate(sim::named_scene(name, 320, 240, 3));
         firefly_test::frame_views off(f), on(f);
         const frame_report r_off = clean(off, false), r_on = clean(on, true);
         REQUIRE(r_off.ok());
@@ -227,4 +236,75 @@ TEST_CASE("two halves, return_energy: only adds, never to the background, lowers
     detector_options bad;
     bad.energy_sigma = 0.5;
     CHECK(check_options(bad).code() == errc::invalid_argument);
+    for (const double coarse : {1.0, -3.0, 300.0, std::nan("")}) {  // below 2, past 256, NaN
+        detector_options o;
+        o.energy_sigma = 8.0;
+        o.energy_coarse_sigma = coarse;
+        CHECK(check_options(o).code() == errc::invalid_argument);
+    }
+    detector_options none;
+    none.energy_coarse_sigma = 0.0;
+    CHECK(check_options(none).ok());
+}
+
+namespace {
+// The mean return over the pixels of a w x h frame at least `margin` from its edges.
+double mean_inside(const std::vector<double>& returned, int w, int h, int margin) {
+    double sum = 0;
+    std::size_t n = 0;
+    for (int y = margin; y < h - margin; ++y)
+        for (int x = margin; x < w - margin; ++x, ++n) sum += returned[static_cast<std::size_t>(y * w + x) * 3];
+    return sum / static_cast<double>(n);
+}
+}  // namespace
+
+TEST_CASE("energy return, coarse scale: sparse fireflies' light comes back evenly, a cluster's stays",
+          "[energy]") {
+    // Lone fireflies spread evenly (one per 24 x 24 pixels, jittered): the fine scale sees at
+    // most one or two in its window and returns nothing; the coarse one sees dozens.
+    const int w = 240, h = 192;
+    const std::size_t n = static_cast<std::size_t>(w * h) * 3;
+    std::vector<double> shape(n, 0.5), excess(n, 0.0), returned;
+    std::mt19937 rng(11);
+    double total = 0;
+    for (int gy = 0; gy < h / 24; ++gy)
+        for (int gx = 0; gx < w / 24; ++gx) {
+            const int x = gx * 24 + static_cast<int>(rng() % 24), y = gy * 24 + static_cast<int>(rng() % 24);
+            const double e = 20.0 + static_cast<double>(rng() % 20);
+            for (int c = 0; c < 3; ++c) excess[static_cast<std::size_t>(y * w + x) * 3 + static_cast<std::size_t>(c)] = e;
+            total += e;
+        }
+    const double density = total / (w * h);
+    energy_scratch s;
+    energy_return(excess, shape, w, h, energy_scales(8.0), returned, s, executor{});
+    const double fine = mean_inside(returned, w, h, 48);
+    energy_return(excess, shape, w, h, energy_scales(8.0, 32.0), returned, s, executor{});
+    INFO("density " << density << ", returned " << fine << " (fine), " << mean_inside(returned, w, h, 48));
+    CHECK(fine < 0.6 * density);  // measured 0.51
+    CHECK(mean_inside(returned, w, h, 48) == Approx(density).epsilon(0.1));  // measured 0.96
+
+    // A dense cluster (a caustic: every pixel of a 24 x 24 patch, excess half the image's level)
+    // on an otherwise clean frame:
+    // the coarse Gaussian alone would give 4% of its light 40 pixels away; the fine sums there
+    // are 0 and the cluster's noise is far too small to explain that, so the fine scale rules
+    // (far out, the coarse value becomes too small for the fine sums to refute: < 0.5%).
+    std::vector<double> patch(n, 0.0), fine_only;
+    for (int y = 84; y < 108; ++y)
+        for (int x = 108; x < 132; ++x)
+            for (int c = 0; c < 3; ++c) patch[static_cast<std::size_t>(y * w + x) * 3 + static_cast<std::size_t>(c)] = 0.25 + 0.01 * (x % 3);
+    energy_return(patch, shape, w, h, energy_scales(8.0), fine_only, s, executor{});
+    energy_return(patch, shape, w, h, energy_scales(8.0, 32.0), returned, s, executor{});
+    double inside = 0, far = 0, peak = 0;
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const double d = std::max(std::abs(x - 119.5), std::abs(y - 95.5));
+            const double v = returned[static_cast<std::size_t>(y * w + x) * 3];
+            if (d < 8) inside = std::max(inside, std::fabs(v - fine_only[static_cast<std::size_t>(y * w + x) * 3]));
+            peak = std::max(peak, v);
+            if (d > 12 + 3 * 8) far = std::max(far, v);  // past the fine Gaussian's reach
+        }
+    INFO("peak " << peak << ", far " << far);
+    CHECK(inside < 1e-3);
+    CHECK(peak > 0.15);  // 0.5 x 0.25 / 0.5 x the Gaussian's share of the patch (0.75): 0.19
+    CHECK(far < 0.005 * peak);
 }

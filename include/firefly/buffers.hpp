@@ -125,6 +125,8 @@ struct cross_buffer_options {
     bool return_energy = true;   // K >= 3, 3 or 4 channels: the removed fireflies' energy is
                                  // returned where many agree on it (energy.hpp)
     double energy_sigma = 8.0;   // its Gaussian's width in pixels (1 to 64)
+    double energy_coarse_sigma = 32.0;  // the wider scale (0 or not above energy_sigma:
+                                        // none; else 2 to 256)
     detector_options pair{};     // K = 2: firefly::detector's options (its own
                                  // return_energy, on by default too)
 };
@@ -136,7 +138,7 @@ inline status check_cross_buffer_options(const cross_buffer_options& o) noexcept
     if (o.radius < 0 || o.radius > 8) return status{errc::invalid_argument, "radius must lie in [0, 8]"};
     if (!(o.energy_sigma >= 1.0 && o.energy_sigma <= 64.0))
         return status{errc::invalid_argument, "energy_sigma must lie in [1, 64]"};
-    return ok_status();
+    return check_energy_coarse(o.energy_coarse_sigma);
 }
 
 struct [[nodiscard]] cross_buffer_report {
@@ -696,7 +698,8 @@ private:
                     row[static_cast<std::size_t>(x) * 3 + static_cast<std::size_t>(c)] = (std::isfinite(m) && m > 0 ? m : 0.0) + excess_[i];
                 }
         };
-        energy_model_rows(excess_, shape_row, w, h, options_.energy_sigma, energy_, exec_);
+        energy_model_rows(excess_, shape_row, w, h, energy_scales(options_.energy_sigma, options_.energy_coarse_sigma),
+                          energy_, exec_);
         row_returned_.assign(static_cast<std::size_t>(h), 0.0);
         if constexpr (!std::is_const_v<C>)
             exec_.run(static_cast<std::size_t>(h), [&](std::size_t row) {
@@ -704,14 +707,7 @@ private:
                 for (int x = 0; x < w; ++x) {
                     double add[3];
                     energy_at(energy_, x, y, add);
-                    if (!(add[0] + add[1] + add[2] > 0)) continue;
-                    // Only where the return is larger than the pixel's own noise (the standard
-                    // error of its mean level): below it the change cannot lower the pixel's
-                    // expected error by much, and the pixel is left as it was.
-                    double level[detail::max_buffers] = {};
-                    for (int c = 0; c < 3; ++c)
-                        for (int i = 0; i < k; ++i) level[i] += b[i].color.load(x, y, c) / 3.0;
-                    if (!((add[0] + add[1] + add[2]) / 3.0 > standard_error(level, k))) continue;
+                    if (!(add[0] + add[1] + add[2] > 0)) continue;  // wherever positive (energy.hpp)
                     // every buffer alike, or none where a sum does not fit a buffer's type
                     double old[detail::max_buffers][3];
                     bool fits = true;
@@ -738,14 +734,6 @@ private:
     std::vector<double> excess_;        // energy return: what was removed, 3 channels per pixel
     std::vector<double> row_returned_;  // energy return: what was given back, per row
 
-    // The standard error of the mean of k levels (their spread / sqrt(k)); k >= 3 here.
-    static double standard_error(const double* level, int k) noexcept {
-        double mean = 0, ss = 0;
-        for (int i = 0; i < k; ++i) mean += level[i] / k;
-        for (int i = 0; i < k; ++i) ss += (level[i] - mean) * (level[i] - mean);
-        const double se = std::sqrt(ss / (k - 1) / k);
-        return std::isfinite(se) ? se : HUGE_VAL;
-    }
     energy_scratch energy_;
 };
 

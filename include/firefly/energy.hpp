@@ -21,6 +21,16 @@
 // keeps M where many fireflies agree on it and drops it where one or two make it up: a lone
 // firefly (V = |M|^2) returns nothing, so no glow is painted around it.
 //
+// Two scales: where fireflies are sparse (one or two in a fine window), the fine sums are mostly
+// noise and s drops them, yet their light was spread evenly and the frame still comes out low
+// (after a denoiser, that bias is most of what is left). A second Gaussian, sigma_c wide (32 by
+// default), sees enough of them; a node takes it where the fine sums agree with what its ratio
+// predicts for them, within the noise the fine sums would have if the coarse window's relative
+// excess |e| / |P| were spread evenly (Lepski's rule: the widest scale the narrow one cannot
+// tell apart), so a caustic's clustered light stays where it fell. The return is added
+// wherever it is positive: most of it is far below a pixel's noise, but it is a bias, which a
+// denoiser's averaging leaves whole.
+//
 // Evaluation: s ratio is smooth at the Gaussian's scale, so M, L and V are summed exactly (the
 // separable Gaussian, taps to 3 sigma, V with the squared taps) only at nodes every
 // node_step(sigma) pixels (sigma / 2, a power of two), and s ratio is interpolated bilinearly
@@ -28,7 +38,9 @@
 // every node. Nodes are placed symmetrically, every sum adds opposite taps first
 // (v[-i] + v[+i]), and the sums and the interpolation are the mean of both orders (x first,
 // y first): a flipped or transposed frame gives the flipped or transposed result bit for bit.
-// Arithmetic in double: a 1e30 excess squared stays finite.
+// The coarse sums are box sums over odd cells (a quarter of sigma_c, symmetric about the
+// frame's centre) and a Gaussian over the cells, read at the nodes with integer bilinear
+// weights, both orders alike. Arithmetic in double: a 1e30 excess squared stays finite.
 #pragma once
 
 #include <algorithm>
@@ -41,6 +53,7 @@
 
 #include "image_view.hpp"
 #include "parallel.hpp"
+#include "status.hpp"
 
 namespace firefly {
 
@@ -60,6 +73,22 @@ inline node_axis make_node_axis(int pixels, int step) {
     a.pixels = pixels;
     a.step = step;
     a.count = (pixels - 1 + step - 1) / step + 1;  // (count - 1) step >= pixels - 1
+    return a;
+}
+
+// Cells of an odd `width` along an axis of n pixels, centred on pixels and symmetric about the
+// axis' centre; centre of cell j at pixel c(j) = ((n - 1) + (2 j - (count - 1)) width) / 2.
+struct cell_axis {
+    int pixels = 1, count = 1, width = 1;
+    int centre2(int j) const noexcept { return (pixels - 1) + (2 * j - (count - 1)) * width; }  // doubled
+};
+
+inline cell_axis make_cell_axis(int pixels, int width) {
+    cell_axis a;
+    a.pixels = pixels;
+    a.width = width;
+    a.count = (pixels + width - 1) / width;
+    if ((a.count - pixels) % 2 != 0) ++a.count;  // same parity: centres on pixels
     return a;
 }
 
@@ -108,7 +137,8 @@ inline tap_pair taps_at(int p2, int d, bool half, int n) noexcept {
     return {p2 - o2 >= 0 && lo < n ? lo : -1, hi >= 0 && hi < n ? hi : -1};
 }
 
-// The record of the model's sums at a pixel or node: M (3 channels), L (3), V, padding.
+// The record of the model's sums at a pixel or node: M (3 channels), L (3), V, and (coarse
+// scale only, else 0) the relative V: the sum of w^2 |e|^2 / |P|^2.
 inline constexpr int record = 8;
 
 // The median of 3 values.
@@ -199,9 +229,13 @@ struct energy_scratch {
     std::vector<double> factor;         // the nodes: the return's share of the profile, 3
     detail::node_axis ax, ay;           // where the nodes are
     std::vector<float> excess;          // return_energy_to_image (float, as the image)
+    std::vector<double> cells, coarse;  // the coarse scale: cell sums, their Gaussian (empty: off)
+    detail::cell_axis cx, cy;           // where the cells are
+    double coarse_var_scale = 0;        // sum w_fine^2 / sum w_coarse^2 (per pixel weights)
     std::size_t bytes() const noexcept {
         return profile.capacity() * sizeof(float) +
-               (xy.capacity() + yx.capacity() + factor.capacity()) * sizeof(double) + excess.capacity() * sizeof(float);
+               (xy.capacity() + yx.capacity() + factor.capacity() + cells.capacity() + coarse.capacity()) * sizeof(double) +
+               excess.capacity() * sizeof(float);
     }
 };
 
@@ -267,7 +301,7 @@ inline void record_sums(int p2, const tap_weights& tw, int n, At&& at, double* s
     for (std::size_t d = 0; d < tw.w.size(); ++d) {
         const tap_pair p = taps_at(p2, static_cast<int>(d), tw.half, n);
         if (p.lo < 0 && p.hi < 0) continue;
-        const double wk[record] = {tw.w[d], tw.w[d], tw.w[d], tw.w[d], tw.w[d], tw.w[d], tw.sq[d], 0.0};
+        const double wk[record] = {tw.w[d], tw.w[d], tw.w[d], tw.w[d], tw.w[d], tw.w[d], tw.sq[d], tw.sq[d]};
         const double* a = p.lo >= 0 ? at(p.lo) : nullptr;
         const double* b = p.hi >= 0 ? at(p.hi) : nullptr;
         if (d == 0 && !tw.half)  // the centre tap: counted once
@@ -373,28 +407,215 @@ inline void energy_y_then_x(const std::vector<E>& excess, const std::vector<P>& 
     });
 }
 
-// The factor each node gives its channels, from the mean of the two orders' sums:
-//     keep min(M / L, 1),  keep = 1 - V / |M|^2 (0 unless > 1e-9)
-inline void energy_factors(energy_scratch& s, std::size_t nodes) {
-    s.factor.assign(nodes * 3, 0.0);
-    for (std::size_t n = 0; n < nodes; ++n) {
-        double r[record];
-        for (int k = 0; k < record; ++k) r[k] = 0.5 * (s.xy[n * record + k] + s.yx[n * record + k]);
-        const double m2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
-        const double keep = m2 > 0 ? 1.0 - r[6] / m2 : 0.0;
-        // a lone firefly gives keep = 0 up to rounding (1e-9: far above it, far below any
-        // second firefly's share); nothing removed nearby gives m2 = 0
-        if (!(keep > 1e-9) || !std::isfinite(m2)) continue;
-        // The ratio is capped at 1: the return never exceeds the shape's own level. Where the
-        // removed light outweighs the rest the fireflies are no longer rare, the shape (a
-        // median of few noisy values) is mostly their noise, and scaling it up multiplies that
-        // noise (simulated dense fireflies at 4 samples a buffer: 2.4x the error of no return).
-        for (int c = 0; c < 3; ++c) {
-            const double l = r[3 + c];
-            const double f = l > 0 ? keep * std::min(r[c] / l, 1.0) : 0.0;
-            s.factor[n * 3 + static_cast<std::size_t>(c)] = std::isfinite(f) && f > 0 ? f : 0.0;
+// ---- The coarse scale ------------------------------------------------------------------------
+// Where fireflies are sparse (a few in a fine window), the fine estimate is mostly noise and the
+// James-Stein factor drops it, yet their light is spread evenly over the frame and the frame
+// still comes out low. A second, wider Gaussian (sigma_c) sees enough of them; it is used at a
+// node when the fine sums agree with it within their noise (Lepski's rule: take the widest
+// scale the narrow one cannot tell apart), so a caustic's clustered light is never spread
+// around it. The coarse sums are taken over a grid of odd cells (box sums, both orders, opposite
+// pixels first) and a Gaussian over the cells, then read at the fine nodes by bilinear
+// interpolation with integer weights: flips and transposes give the same bits.
+
+// The sum over i = c - half .. c + half (inside 0..n-1) of get(i)'s `record` values into out:
+// the centre, then opposite pairs (a + b), or (a + 0) where one is outside, as line_sums does.
+template <class Get>
+inline void symmetric_sum(int c, int half, int n, Get&& get, double* out) {
+    for (int k = 0; k < record; ++k) out[k] = 0.0;
+    if (c >= 0 && c < n) {
+        const double* v = get(c);
+        for (int k = 0; k < record; ++k) out[k] += v[k];
+    }
+    for (int d = 1; d <= half; ++d) {
+        const int a = c - d, b = c + d;
+        const bool ia = a >= 0 && a < n, ib = b >= 0 && b < n;
+        if (ia && ib) {
+            const double* va = get(a);
+            const double* vb = get(b);
+            for (int k = 0; k < record; ++k) out[k] += va[k] + vb[k];
+        } else if (ia || ib) {
+            const double* v = get(ia ? a : b);
+            for (int k = 0; k < record; ++k) out[k] += v[k] + 0.0;
         }
     }
+}
+
+// Box sums of every cell: excess (3), profile (3), |e|^2, |e|^2 / |P|^2 (P the profile; 0 where
+// it is 0); the mean of both orders.
+template <class E, class P>
+inline void cell_sums(const std::vector<E>& excess, const std::vector<P>& profile, int w, int h,
+                      const cell_axis& cx, const cell_axis& cy, std::vector<double>& cells, const executor& exec) {
+    const std::size_t ncx = static_cast<std::size_t>(cx.count), hw = static_cast<std::size_t>(cx.width / 2);
+    cells.assign(static_cast<std::size_t>(cy.count) * ncx * record, 0.0);
+    exec.run(static_cast<std::size_t>(cy.count), [&](std::size_t jy) {
+        thread_local std::vector<double> px, rows, cols;
+        const int c0 = cy.centre2(static_cast<int>(jy)) / 2, y0 = c0 - static_cast<int>(hw);
+        const int wc = cy.width;
+        px.assign(static_cast<std::size_t>(wc) * static_cast<std::size_t>(w) * record, 0.0);
+        for (int r = 0; r < wc; ++r) {  // the band's pixels as records
+            const int y = y0 + r;
+            if (y < 0 || y >= h) continue;
+            for (int x = 0; x < w; ++x) {
+                const std::size_t q = (static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)) * 3;
+                double* o = &px[(static_cast<std::size_t>(r) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)) * record];
+                for (std::size_t c = 0; c < 3; ++c) {
+                    o[c] = static_cast<double>(excess[q + c]);
+                    o[3 + c] = static_cast<double>(profile[q + c]);
+                }
+                o[6] = squared(&excess[q]);
+                const double p2 = o[3] * o[3] + o[4] * o[4] + o[5] * o[5];  // relative: |e|^2 / |P|^2
+                o[7] = o[6] > 0 && p2 > 0 ? std::min(o[6] / p2, DBL_MAX) : 0.0;
+            }
+        }
+        auto pixel = [&](int r, int x) { return &px[(static_cast<std::size_t>(r) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)) * record]; };
+        const int hr = static_cast<int>(hw);
+        // x first: each row of the band summed over each cell, then the rows
+        rows.assign(static_cast<std::size_t>(wc) * ncx * record, 0.0);
+        for (int r = 0; r < wc; ++r)
+            for (std::size_t j = 0; j < ncx; ++j)
+                symmetric_sum(cx.centre2(static_cast<int>(j)) / 2, hr, w, [&](int x) { return pixel(r, x); },
+                              &rows[(static_cast<std::size_t>(r) * ncx + j) * record]);
+        // y first: each column summed over the band's rows (rows outside the frame are 0
+        // records here, so the band is summed whole: the same as skipping them), then the cells
+        cols.assign(static_cast<std::size_t>(w) * record, 0.0);
+        for (int x = 0; x < w; ++x)
+            symmetric_sum(hr, hr, wc, [&](int r) { return pixel(r, x); },
+                          &cols[static_cast<std::size_t>(x) * record]);
+        for (std::size_t j = 0; j < ncx; ++j) {
+            double a[record], b[record];
+            symmetric_sum(hr, hr, wc, [&](int r) { return &rows[(static_cast<std::size_t>(r) * ncx + j) * record]; }, a);
+            symmetric_sum(cx.centre2(static_cast<int>(j)) / 2, hr, w, [&](int x) { return &cols[static_cast<std::size_t>(x) * record]; }, b);
+            for (int k = 0; k < record; ++k) cells[(jy * ncx + j) * record + static_cast<std::size_t>(k)] = 0.5 * (a[k] + b[k]);
+        }
+    });
+}
+
+// The coarse Gaussian (taps over cells) of the cell records, in both orders, averaged: out
+// holds M, L (the cells' weights) and V (their squares) per cell.
+inline void coarse_blur(const std::vector<double>& cells, const cell_axis& cx, const cell_axis& cy, const tap_weights& tw,
+                        std::vector<double>& out, const executor& exec) {
+    const std::size_t nx = static_cast<std::size_t>(cx.count), ny = static_cast<std::size_t>(cy.count);
+    std::vector<double> along_x(cells.size()), along_y(cells.size()), second(cells.size());
+    auto cell = [&](const std::vector<double>& g, std::size_t jy, std::size_t jx) { return &g[(jy * nx + jx) * record]; };
+    exec.run(ny, [&](std::size_t jy) {  // along x, then (below) along y
+        for (std::size_t jx = 0; jx < nx; ++jx)
+            record_sums(2 * static_cast<int>(jx), tw, cx.count, [&](int j) { return cell(cells, jy, static_cast<std::size_t>(j)); },
+                        &along_x[(jy * nx + jx) * record]);
+    });
+    exec.run(nx, [&](std::size_t jx) {  // along y, then (below) along x
+        for (std::size_t jy = 0; jy < ny; ++jy)
+            record_sums(2 * static_cast<int>(jy), tw, cy.count, [&](int j) { return cell(cells, static_cast<std::size_t>(j), jx); },
+                        &along_y[(jy * nx + jx) * record]);
+    });
+    out.resize(cells.size());
+    exec.run(nx, [&](std::size_t jx) {
+        for (std::size_t jy = 0; jy < ny; ++jy)
+            record_sums(2 * static_cast<int>(jy), tw, cy.count, [&](int j) { return cell(along_x, static_cast<std::size_t>(j), jx); },
+                        &second[(jy * nx + jx) * record]);
+    });
+    exec.run(ny, [&](std::size_t jy) {
+        for (std::size_t jx = 0; jx < nx; ++jx) {
+            double b[record];
+            record_sums(2 * static_cast<int>(jx), tw, cx.count, [&](int j) { return cell(along_y, jy, static_cast<std::size_t>(j)); }, b);
+            double* o = &out[(jy * nx + jx) * record];
+            const double* a = &second[(jy * nx + jx) * record];
+            for (int k = 0; k < record; ++k) o[k] = 0.5 * (a[k] + b[k]);
+        }
+    });
+}
+
+// The cell interval of doubled pixel position p2 and its integer weight k on the upper cell,
+// out of 2 width (positions past the outer centres take the outer cell).
+struct cell_lerp {
+    int j = 0, k = 0;
+};
+inline cell_lerp cell_lerp_at(const cell_axis& a, int p2) noexcept {
+    if (a.count == 1) return {};
+    const int span = 2 * a.width, off = p2 - a.centre2(0);
+    if (off <= 0) return {0, 0};
+    const int j = std::min(off / span, a.count - 2);
+    return {j, std::min(p2 - a.centre2(j), span)};
+}
+
+// The coarse record at doubled pixel position (px2, py2): bilinear over the four cells, integer
+// weights, the mean of both orders (as bilinear): mirrored positions give the same bits.
+inline void coarse_at(const std::vector<double>& coarse, const cell_axis& cx, const cell_axis& cy, int px2, int py2,
+                      double* out) noexcept {
+    const cell_lerp lx = cell_lerp_at(cx, px2), ly = cell_lerp_at(cy, py2);
+    const std::size_t nx = static_cast<std::size_t>(cx.count);
+    const std::size_t j0 = static_cast<std::size_t>(lx.j), j1 = cx.count > 1 ? j0 + 1 : j0;
+    const std::size_t i0 = static_cast<std::size_t>(ly.j), i1 = cy.count > 1 ? i0 + 1 : i0;
+    const double dx = 2.0 * cx.width, dy = 2.0 * cy.width;
+    const double ax = dx - lx.k, bx = lx.k, ay = dy - ly.k, by = ly.k;
+    for (int k = 0; k < record; ++k) {
+        const double f00 = coarse[(i0 * nx + j0) * record + static_cast<std::size_t>(k)];
+        const double f01 = coarse[(i0 * nx + j1) * record + static_cast<std::size_t>(k)];
+        const double f10 = coarse[(i1 * nx + j0) * record + static_cast<std::size_t>(k)];
+        const double f11 = coarse[(i1 * nx + j1) * record + static_cast<std::size_t>(k)];
+        const double xy = ay * (ax * f00 + bx * f01) + by * (ax * f10 + bx * f11);
+        const double yx = ax * (ay * f00 + by * f10) + bx * (ay * f01 + by * f11);
+        out[k] = 0.5 * (xy + yx) / (dx * dy);
+    }
+}
+
+// keep min(M / L, 1) per channel of a record (M, L, V), keep = 1 - V / |M|^2 (0 unless > 1e-9).
+inline void shrunk_ratio(const double* r, double* f) noexcept {
+    f[0] = f[1] = f[2] = 0.0;
+    const double m2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+    const double keep = m2 > 0 ? 1.0 - r[6] / m2 : 0.0;
+    // a lone firefly gives keep = 0 up to rounding (1e-9: far above it, far below any second
+    // firefly's share); nothing removed nearby gives m2 = 0
+    if (!(keep > 1e-9) || !std::isfinite(m2)) return;
+    // The ratio is capped at 1: the return never exceeds the shape's own level. Where the
+    // removed light outweighs the rest the fireflies are no longer rare, the shape (a median of
+    // few noisy values) is mostly their noise, and scaling it up multiplies that noise
+    // (simulated dense fireflies at 4 samples a buffer: 2.4x the error of no return).
+    for (int c = 0; c < 3; ++c) {
+        const double l = r[3 + c];
+        const double v = l > 0 ? keep * std::min(r[c] / l, 1.0) : 0.0;
+        f[c] = std::isfinite(v) && v > 0 ? v : 0.0;
+    }
+}
+
+// How far the coarse scale may be trusted at a node: the fine sums r against what the coarse
+// ratio predicts for them (L_fine M_c / L_c), in units of the noise the fine M would have if the
+// coarse window's fireflies were spread evenly in proportion to the image (the model's ratio:
+// the relative excess |e| / |P| has the same distribution everywhere). With var_scale = sum
+// w_f^2 / sum w_c^2, that noise is var_scale x (the coarse sum of w^2 |e|^2 / |P|^2) x |L_fine|^2:
+// a bright cluster's large excess does not widen the tolerance in the dim pixels around it.
+// 1 up to 2 noise deviations, 0 from 3.
+inline double coarse_trust(const double* r, const double* c, double var_scale) noexcept {
+    const double v0 = c[7] * var_scale * (r[3] * r[3] + r[4] * r[4] + r[5] * r[5]);
+    if (!(v0 > 0) || !std::isfinite(v0)) return 0.0;
+    double d2 = 0;
+    for (int k = 0; k < 3; ++k) {
+        const double predicted = c[3 + k] > 0 ? r[3 + k] * (c[k] / c[3 + k]) : 0.0;
+        d2 += (r[k] - predicted) * (r[k] - predicted);
+    }
+    const double z = std::sqrt(d2 / v0);
+    return std::isfinite(z) ? std::clamp(3.0 - z, 0.0, 1.0) : 0.0;
+}
+
+// The factor each node gives its channels, from the mean of the two orders' sums: the fine
+// scale's shrunk ratio, or the coarse scale's where the fine sums cannot tell them apart.
+inline void energy_factors(energy_scratch& s) {
+    const std::size_t nx = static_cast<std::size_t>(s.ax.count), ny = static_cast<std::size_t>(s.ay.count);
+    s.factor.assign(nx * ny * 3, 0.0);
+    for (std::size_t i = 0; i < ny; ++i)
+        for (std::size_t j = 0; j < nx; ++j) {
+            const std::size_t n = i * nx + j;
+            double r[record], f[3];
+            for (int k = 0; k < record; ++k) r[k] = 0.5 * (s.xy[n * record + k] + s.yx[n * record + k]);
+            shrunk_ratio(r, f);
+            if (!s.coarse.empty()) {
+                double c[record], fc[3];
+                coarse_at(s.coarse, s.cx, s.cy, s.ax.pos2(static_cast<int>(j)), s.ay.pos2(static_cast<int>(i)), c);
+                shrunk_ratio(c, fc);
+                const double a = coarse_trust(r, c, s.coarse_var_scale);
+                for (int k = 0; k < 3; ++k) f[k] = a * fc[k] + (1.0 - a) * f[k];
+            }
+            for (int k = 0; k < 3; ++k) s.factor[n * 3 + static_cast<std::size_t>(k)] = f[k];
+        }
 }
 
 // The node interval of pixel x and its weight on the upper node (exact: step is a power of 2).
@@ -419,14 +640,56 @@ inline double bilinear(double f00, double f01, double f10, double f11, double tx
 
 }  // namespace detail
 
+// The Gaussians' widths in pixels: the fine scale, and the coarse one (0: none; else wider).
+struct energy_scales {
+    double fine = 8.0, coarse = 0.0;
+    energy_scales(double f, double c = 0.0) : fine(f), coarse(c) {}  // NOLINT: a width alone is the fine one
+};
+
+// The coarse width an option may hold: 0 (none), or 2 to 256 pixels (a width not above the
+// fine one turns the coarse scale off).
+inline status check_energy_coarse(double coarse) noexcept {
+    if (coarse == 0.0 || (coarse >= 2.0 && coarse <= 256.0)) return ok_status();
+    return status{errc::invalid_argument, "energy_coarse_sigma must be 0 or lie in [2, 256]"};
+}
+
+namespace detail {
+// The coarse scale's cells, sums and Gaussian (see cell_sums): cells of the odd width nearest
+// a quarter of sigma (interpolating a Gaussian between points a quarter of its width apart
+// errs by ~1/128 of its peak), the Gaussian over the cells sigma / width wide.
+template <class E>
+inline void coarse_model(const std::vector<E>& excess, int w, int h, const energy_scales& sc, const tap_weights& fine,
+                         energy_scratch& s, const executor& exec) {
+    if (!(sc.coarse > sc.fine)) {
+        s.cells.clear(), s.coarse.clear();
+        return;
+    }
+    const int width = std::max(1, static_cast<int>(sc.coarse / 4.0)) | 1;
+    s.cx = make_cell_axis(w, width);
+    s.cy = make_cell_axis(h, width);
+    const double sigma = sc.coarse / width;
+    const tap_weights tw = make_taps(sigma, std::max(1, static_cast<int>(std::ceil(3.0 * sigma))), false);
+    cell_sums(excess, s.profile, w, h, s.cx, s.cy, s.cells, exec);
+    coarse_blur(s.cells, s.cx, s.cy, tw, s.coarse, exec);
+    auto sum_sq = [](const tap_weights& t) {  // one axis, both sides
+        double v = t.sq[0];
+        for (std::size_t d = 1; d < t.sq.size(); ++d) v += 2.0 * t.sq[d];
+        return v;
+    };
+    const double fine2 = sum_sq(fine), coarse2 = width * sum_sq(tw);  // a cell's weight is each pixel's
+    s.coarse_var_scale = (fine2 * fine2) / (coarse2 * coarse2);
+}
+}  // namespace detail
+
 // The model of the energy return for one frame, from the removed excess `excess` (3
 // interleaved channels, w x h, 0 where nothing was removed) and the image whose 3x3 median
 // shapes the return (3 channels, finite, >= 0; row y written by shape_rows(y, out), or held
 // whole: energy_model): the profile and the nodes' factors in `s`, read back per pixel by
-// energy_at. sigma: the Gaussian's width in pixels.
+// energy_at. sc: the Gaussians' widths in pixels.
 template <class E, class ShapeRows>
-inline void energy_model_rows(const std::vector<E>& excess, ShapeRows&& shape_rows, int w, int h, double sigma,
+inline void energy_model_rows(const std::vector<E>& excess, ShapeRows&& shape_rows, int w, int h, energy_scales sc,
                               energy_scratch& s, const executor& exec) {
+    const double sigma = sc.fine;
     const int r = std::max(1, static_cast<int>(std::ceil(3.0 * sigma)));
     const detail::tap_weights taps[2] = {detail::make_taps(sigma, r, false), detail::make_taps(sigma, r, true)};
     const int step = detail::node_step(sigma);
@@ -435,11 +698,12 @@ inline void energy_model_rows(const std::vector<E>& excess, ShapeRows&& shape_ro
     detail::median3x3_rows(shape_rows, s.profile, w, h, exec);
     detail::energy_x_then_y(excess, s.profile, w, h, s.ax, s.ay, taps, s, exec);
     detail::energy_y_then_x(excess, s.profile, w, h, s.ax, s.ay, taps, s, exec);
-    detail::energy_factors(s, static_cast<std::size_t>(s.ay.count) * static_cast<std::size_t>(s.ax.count));
+    detail::coarse_model(excess, w, h, sc, taps[0], s, exec);
+    detail::energy_factors(s);
 }
 
 inline void energy_model(const std::vector<double>& excess, const std::vector<double>& shape, int w, int h,
-                         double sigma, energy_scratch& s, const executor& exec) {
+                         energy_scales sigma, energy_scratch& s, const executor& exec) {
     const std::size_t n = static_cast<std::size_t>(w) * 3;
     energy_model_rows(excess, [&](int y, double* row) { std::copy_n(&shape[static_cast<std::size_t>(y) * n], n, row); },
                       w, h, sigma, s, exec);
@@ -463,7 +727,7 @@ inline void energy_at(const energy_scratch& s, int x, int y, double* add) noexce
 
 // The whole return as an image (3 interleaved channels, w x h) in `returned`.
 inline void energy_return(const std::vector<double>& excess, const std::vector<double>& shape, int w, int h,
-                          double sigma, std::vector<double>& returned, energy_scratch& s, const executor& exec) {
+                          energy_scales sigma, std::vector<double>& returned, energy_scratch& s, const executor& exec) {
     energy_model(excess, shape, w, h, sigma, s, exec);
     returned.resize(static_cast<std::size_t>(w) * static_cast<std::size_t>(h) * 3);
     exec.run(static_cast<std::size_t>(h), [&](std::size_t y) {
@@ -499,15 +763,14 @@ void restore_light(const image_view<C>& color, int x, int y, const double* old, 
 }
 
 // The energy return on one cleaned image (the first three channels of `color`): pixel
-// rebuilt[e] held before[3 e .. 3 e + 2] before it was rebuilt. The return is added where it
-// exceeds the pixel's standard error, sqrt(variance_scale x the mean of its variance
-// channels), and never where keep[p] is false (black background, alpha 0). added (when not
-// null, one per pixel): set to 1 where light was added, else left as it was.
-template <class C, class V>
-energy_totals return_energy_to_image(const image_view<C>& color, const image_view<V>& variance, double variance_scale,
-                                     const std::uint32_t* rebuilt, const float* before, std::size_t n,
-                                     const std::uint8_t* keep, double sigma, energy_scratch& s, const executor& exec,
-                                     std::uint8_t* added = nullptr) {
+// rebuilt[e] held before[3 e .. 3 e + 2] before it was rebuilt. The return is added wherever it
+// is positive, never where keep[p] is false (black background, alpha 0): a change far below the
+// pixel's noise still removes a bias that a denoiser, which averages the noise away, cannot.
+// added (when not null, one per pixel): set to 1 where light was added, else left as it was.
+template <class C>
+energy_totals return_energy_to_image(const image_view<C>& color, const std::uint32_t* rebuilt, const float* before,
+                                     std::size_t n, const std::uint8_t* keep, energy_scales sigma, energy_scratch& s,
+                                     const executor& exec, std::uint8_t* added = nullptr) {
     energy_totals t;
     const int w = color.width(), h = color.height();
     if (color.channels() < 3) return t;
@@ -532,7 +795,6 @@ energy_totals return_energy_to_image(const image_view<C>& color, const image_vie
             }
     };
     energy_model_rows(s.excess, shape_row, w, h, sigma, s, exec);
-    const int nv = variance.channels() == 1 ? 1 : 3;
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
             const std::size_t p = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
@@ -542,9 +804,6 @@ energy_totals return_energy_to_image(const image_view<C>& color, const image_vie
             energy_at(s, x, y, add);
             const double mean_add = (add[0] + add[1] + add[2]) / 3.0;
             if (!(mean_add > 0)) continue;
-            double var = 0;
-            for (int c = 0; c < nv; ++c) var += std::max(static_cast<double>(variance.load(x, y, c)), 0.0) / nv;
-            if (!(mean_add > std::sqrt(variance_scale * var))) continue;
             double old[3];
             if (!add_light(color, x, y, add, old)) {
                 restore_light(color, x, y, old, add);

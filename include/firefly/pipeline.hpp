@@ -89,6 +89,9 @@ struct detector_options {
                                         // dense fireflies, never lowers any; false: the
                                         // paper's removal alone)
     double energy_sigma = 8.0;          // its Gaussian's width in pixels (1 to 64)
+    double energy_coarse_sigma = 32.0;  // the wider scale, used where the fine one cannot tell
+                                        // them apart (sparse fireflies); 0 or not above
+                                        // energy_sigma: none; else 2 to 256
 };
 
 inline status check_options(const detector_options& o) noexcept {
@@ -108,6 +111,7 @@ inline status check_options(const detector_options& o) noexcept {
     if (status st = check_local_test_options(o.local); !st.ok()) return st;
     if (!(o.energy_sigma >= 1.0 && o.energy_sigma <= 64.0))
         return status{errc::invalid_argument, "energy_sigma must lie in [1, 64]"};
+    if (status st = check_energy_coarse(o.energy_coarse_sigma); !st.ok()) return st;
     return check_reconstruct_options(o.reconstruction);
 }
 
@@ -323,7 +327,7 @@ private:
         if (energy) exec_.run(2, [&](std::size_t h) { keep_before(*hb[h], halves_[h]); });
         exec_.run(2, [&](std::size_t h) { finish(*hb[h], halves_[h], *masks[h], rep.half[h], clean, cross); });
         if (energy)
-            for (int h = 0; h < 2; ++h) give_energy_back(*hb[h], halves_[h], *masks[h], rep.half[h], rep.variance_calibration);
+            for (int h = 0; h < 2; ++h) give_energy_back(*hb[h], halves_[h], *masks[h], rep.half[h]);
         clock.lap(frame_report::rebuild);
         for (const half_report& hr : rep.half)
             if (!hr.reconstruction.ok()) rep.error = hr.reconstruction;
@@ -858,14 +862,14 @@ private:
     // non-finite pixels. The pixels it adds light to get mask_bits::energy.
     template <class C, class V, class A>
     void give_energy_back(const half_buffer<C, V, A>& hb, half_state& s, const image_view<std::uint8_t>& mask,
-                          half_report& r, double calibration) {
+                          half_report& r) {
         if constexpr (!std::is_const_v<C>) {
             s.decision.resize(s.label.size());
             for (std::size_t i = 0; i < s.label.size(); ++i) s.decision[i] = cls(s.label[i]) == valid_class;
             s.added.assign(mask.empty() ? 0 : s.label.size(), 0);
-            const energy_totals t = return_energy_to_image(hb.color, hb.variance, calibration, s.fix.data(),
+            const energy_totals t = return_energy_to_image(hb.color, s.fix.data(),
                                                            s.before.data(), s.fix.size(), s.decision.data(),
-                                                           options_.energy_sigma, s.energy, exec_,
+                                                           energy_scales(options_.energy_sigma, options_.energy_coarse_sigma), s.energy, exec_,
                                                            mask.empty() ? nullptr : s.added.data());
             r.energy_removed = t.removed;
             r.energy_returned = t.returned;
@@ -874,7 +878,7 @@ private:
                 for (int x = 0; x < w; ++x)
                     if (s.added[index(x, y, w)]) mask(x, y) = static_cast<std::uint8_t>(mask(x, y) | mask_bits::energy);
         } else {
-            (void)hb, (void)s, (void)mask, (void)r, (void)calibration;
+            (void)hb, (void)s, (void)mask, (void)r;
         }
     }
 
