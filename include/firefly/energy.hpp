@@ -407,37 +407,14 @@ inline void energy_y_then_x(const std::vector<E>& excess, const std::vector<P>& 
     });
 }
 
-// ---- The coarse scale ------------------------------------------------------------------------
-// Where fireflies are sparse (a few in a fine window), the fine estimate is mostly noise and the
-// James-Stein factor drops it, yet their light is spread evenly over the frame and the frame
-// still comes out low. A second, wider Gaussian (sigma_c) sees enough of them; it is used at a
-// node when the fine sums agree with it within their noise (Lepski's rule: take the widest
-// scale the narrow one cannot tell apart), so a caustic's clustered light is never spread
-// around it. The coarse sums are taken over a grid of odd cells (box sums, both orders, opposite
-// pixels first) and a Gaussian over the cells, then read at the fine nodes by bilinear
-// interpolation with integer weights: flips and transposes give the same bits.
+// ---- The coarse scale (see the top of this file) -----------------------------------------------
 
-// The sum over i = c - half .. c + half (inside 0..n-1) of get(i)'s `record` values into out:
-// the centre, then opposite pairs (a + b), or (a + 0) where one is outside, as line_sums does.
-template <class Get>
-inline void symmetric_sum(int c, int half, int n, Get&& get, double* out) {
-    for (int k = 0; k < record; ++k) out[k] = 0.0;
-    if (c >= 0 && c < n) {
-        const double* v = get(c);
-        for (int k = 0; k < record; ++k) out[k] += v[k];
-    }
-    for (int d = 1; d <= half; ++d) {
-        const int a = c - d, b = c + d;
-        const bool ia = a >= 0 && a < n, ib = b >= 0 && b < n;
-        if (ia && ib) {
-            const double* va = get(a);
-            const double* vb = get(b);
-            for (int k = 0; k < record; ++k) out[k] += va[k] + vb[k];
-        } else if (ia || ib) {
-            const double* v = get(ia ? a : b);
-            for (int k = 0; k < record; ++k) out[k] += v[k] + 0.0;
-        }
-    }
+// Unit taps over 2 half + 1 pixels: record_sums with them is a box sum (1 x v is v exactly).
+inline tap_weights box_taps(int half) {
+    tap_weights t;
+    t.w.assign(static_cast<std::size_t>(half) + 1, 1.0);
+    t.sq = t.w;
+    return t;
 }
 
 // Box sums of every cell: excess (3), profile (3), |e|^2, |e|^2 / |P|^2 (P the profile; 0 where
@@ -463,28 +440,29 @@ inline void cell_sums(const std::vector<E>& excess, const std::vector<P>& profil
                     o[3 + c] = static_cast<double>(profile[q + c]);
                 }
                 o[6] = squared(&excess[q]);
+                if (!(o[6] > 0)) continue;  // o[7] stays 0
                 const double p2 = o[3] * o[3] + o[4] * o[4] + o[5] * o[5];  // relative: |e|^2 / |P|^2
-                o[7] = o[6] > 0 && p2 > 0 ? std::min(o[6] / p2, DBL_MAX) : 0.0;
+                o[7] = p2 > 0 ? std::min(o[6] / p2, DBL_MAX) : 0.0;
             }
         }
         auto pixel = [&](int r, int x) { return &px[(static_cast<std::size_t>(r) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)) * record]; };
-        const int hr = static_cast<int>(hw);
+        const tap_weights box = box_taps(static_cast<int>(hw));
         // x first: each row of the band summed over each cell, then the rows
         rows.assign(static_cast<std::size_t>(wc) * ncx * record, 0.0);
         for (int r = 0; r < wc; ++r)
             for (std::size_t j = 0; j < ncx; ++j)
-                symmetric_sum(cx.centre2(static_cast<int>(j)) / 2, hr, w, [&](int x) { return pixel(r, x); },
-                              &rows[(static_cast<std::size_t>(r) * ncx + j) * record]);
+                record_sums(cx.centre2(static_cast<int>(j)), box, w, [&](int x) { return pixel(r, x); },
+                            &rows[(static_cast<std::size_t>(r) * ncx + j) * record]);
         // y first: each column summed over the band's rows (rows outside the frame are 0
         // records here, so the band is summed whole: the same as skipping them), then the cells
         cols.assign(static_cast<std::size_t>(w) * record, 0.0);
         for (int x = 0; x < w; ++x)
-            symmetric_sum(hr, hr, wc, [&](int r) { return pixel(r, x); },
-                          &cols[static_cast<std::size_t>(x) * record]);
+            record_sums(2 * static_cast<int>(hw), box, wc, [&](int r) { return pixel(r, x); },
+                        &cols[static_cast<std::size_t>(x) * record]);
         for (std::size_t j = 0; j < ncx; ++j) {
             double a[record], b[record];
-            symmetric_sum(hr, hr, wc, [&](int r) { return &rows[(static_cast<std::size_t>(r) * ncx + j) * record]; }, a);
-            symmetric_sum(cx.centre2(static_cast<int>(j)) / 2, hr, w, [&](int x) { return &cols[static_cast<std::size_t>(x) * record]; }, b);
+            record_sums(2 * static_cast<int>(hw), box, wc, [&](int r) { return &rows[(static_cast<std::size_t>(r) * ncx + j) * record]; }, a);
+            record_sums(cx.centre2(static_cast<int>(j)), box, w, [&](int x) { return &cols[static_cast<std::size_t>(x) * record]; }, b);
             for (int k = 0; k < record; ++k) cells[(jy * ncx + j) * record + static_cast<std::size_t>(k)] = 0.5 * (a[k] + b[k]);
         }
     });
