@@ -468,38 +468,30 @@ inline void cell_sums(const std::vector<E>& excess, const std::vector<P>& profil
     });
 }
 
+// One pass of the coarse Gaussian over a grid of cell records (nx x ny), along x or along y.
+inline void cell_pass(const std::vector<double>& src, std::vector<double>& dst, std::size_t nx, std::size_t ny,
+                      bool along_x, const tap_weights& tw, const executor& exec) {
+    dst.resize(src.size());
+    const std::size_t lines = along_x ? ny : nx, n = along_x ? nx : ny;
+    exec.run(lines, [&](std::size_t line) {
+        auto at = [&](std::size_t i) { return along_x ? (line * nx + i) * record : (i * nx + line) * record; };
+        for (std::size_t i = 0; i < n; ++i)
+            record_sums(2 * static_cast<int>(i), tw, static_cast<int>(n),
+                        [&](int j) { return &src[at(static_cast<std::size_t>(j))]; }, &dst[at(i)]);
+    });
+}
+
 // The coarse Gaussian (taps over cells) of the cell records, in both orders, averaged: out
 // holds M, L (the cells' weights) and V (their squares) per cell.
 inline void coarse_blur(const std::vector<double>& cells, const cell_axis& cx, const cell_axis& cy, const tap_weights& tw,
                         std::vector<double>& out, const executor& exec) {
     const std::size_t nx = static_cast<std::size_t>(cx.count), ny = static_cast<std::size_t>(cy.count);
-    std::vector<double> along_x(cells.size()), along_y(cells.size()), second(cells.size());
-    auto cell = [&](const std::vector<double>& g, std::size_t jy, std::size_t jx) { return &g[(jy * nx + jx) * record]; };
-    exec.run(ny, [&](std::size_t jy) {  // along x, then (below) along y
-        for (std::size_t jx = 0; jx < nx; ++jx)
-            record_sums(2 * static_cast<int>(jx), tw, cx.count, [&](int j) { return cell(cells, jy, static_cast<std::size_t>(j)); },
-                        &along_x[(jy * nx + jx) * record]);
-    });
-    exec.run(nx, [&](std::size_t jx) {  // along y, then (below) along x
-        for (std::size_t jy = 0; jy < ny; ++jy)
-            record_sums(2 * static_cast<int>(jy), tw, cy.count, [&](int j) { return cell(cells, static_cast<std::size_t>(j), jx); },
-                        &along_y[(jy * nx + jx) * record]);
-    });
-    out.resize(cells.size());
-    exec.run(nx, [&](std::size_t jx) {
-        for (std::size_t jy = 0; jy < ny; ++jy)
-            record_sums(2 * static_cast<int>(jy), tw, cy.count, [&](int j) { return cell(along_x, static_cast<std::size_t>(j), jx); },
-                        &second[(jy * nx + jx) * record]);
-    });
-    exec.run(ny, [&](std::size_t jy) {
-        for (std::size_t jx = 0; jx < nx; ++jx) {
-            double b[record];
-            record_sums(2 * static_cast<int>(jx), tw, cx.count, [&](int j) { return cell(along_y, jy, static_cast<std::size_t>(j)); }, b);
-            double* o = &out[(jy * nx + jx) * record];
-            const double* a = &second[(jy * nx + jx) * record];
-            for (int k = 0; k < record; ++k) o[k] = 0.5 * (a[k] + b[k]);
-        }
-    });
+    std::vector<double> pass, yx;
+    cell_pass(cells, pass, nx, ny, true, tw, exec);  // x first
+    cell_pass(pass, out, nx, ny, false, tw, exec);
+    cell_pass(cells, pass, nx, ny, false, tw, exec);  // y first
+    cell_pass(pass, yx, nx, ny, true, tw, exec);
+    for (std::size_t i = 0; i < out.size(); ++i) out[i] = 0.5 * (out[i] + yx[i]);
 }
 
 // The cell interval of doubled pixel position p2 and its integer weight k on the upper cell,
@@ -515,8 +507,18 @@ inline cell_lerp cell_lerp_at(const cell_axis& a, int p2) noexcept {
     return {j, std::min(p2 - a.centre2(j), span)};
 }
 
+// Bilinear interpolation of four values f00 (x0, y0), f01 (x1, y0), f10, f11 with weights ax,
+// bx along x and ay, by along y, the mean of the two orders (x first, y first): flips and
+// transposes (which swap the weights) give the same bits.
+inline double weighted_bilinear(double f00, double f01, double f10, double f11, double ax, double bx, double ay,
+                                double by) noexcept {
+    const double xy = ay * (ax * f00 + bx * f01) + by * (ax * f10 + bx * f11);
+    const double yx = ax * (ay * f00 + by * f10) + bx * (ay * f01 + by * f11);
+    return 0.5 * (xy + yx);
+}
+
 // The coarse record at doubled pixel position (px2, py2): bilinear over the four cells, integer
-// weights, the mean of both orders (as bilinear): mirrored positions give the same bits.
+// weights (out of 2 width along each axis): mirrored positions give the same bits.
 inline void coarse_at(const std::vector<double>& coarse, const cell_axis& cx, const cell_axis& cy, int px2, int py2,
                       double* out) noexcept {
     const cell_lerp lx = cell_lerp_at(cx, px2), ly = cell_lerp_at(cy, py2);
@@ -530,9 +532,7 @@ inline void coarse_at(const std::vector<double>& coarse, const cell_axis& cx, co
         const double f01 = coarse[(i0 * nx + j1) * record + static_cast<std::size_t>(k)];
         const double f10 = coarse[(i1 * nx + j0) * record + static_cast<std::size_t>(k)];
         const double f11 = coarse[(i1 * nx + j1) * record + static_cast<std::size_t>(k)];
-        const double xy = ay * (ax * f00 + bx * f01) + by * (ax * f10 + bx * f11);
-        const double yx = ax * (ay * f00 + by * f10) + bx * (ay * f01 + by * f11);
-        out[k] = 0.5 * (xy + yx) / (dx * dy);
+        out[k] = weighted_bilinear(f00, f01, f10, f11, ax, bx, ay, by) / (dx * dy);
     }
 }
 
@@ -608,12 +608,9 @@ inline node_lerp lerp_at(const node_axis& a, int x) noexcept {
     return {j, static_cast<double>(2 * x - a.pos2(j)) / (2.0 * a.step)};
 }
 
-// Bilinear interpolation of the four nodes' values f00 (x0, y0), f01 (x1, y0), f10, f11, the
-// mean of the two orders (x first, y first): flips and transposes give the same bits.
+// Bilinear interpolation of the four nodes' values at fractions tx, ty (weighted_bilinear).
 inline double bilinear(double f00, double f01, double f10, double f11, double tx, double ty) noexcept {
-    const double xy = (1.0 - ty) * ((1.0 - tx) * f00 + tx * f01) + ty * ((1.0 - tx) * f10 + tx * f11);
-    const double yx = (1.0 - tx) * ((1.0 - ty) * f00 + ty * f10) + tx * ((1.0 - ty) * f01 + ty * f11);
-    return 0.5 * (xy + yx);
+    return weighted_bilinear(f00, f01, f10, f11, 1.0 - tx, tx, 1.0 - ty, ty);
 }
 
 }  // namespace detail
