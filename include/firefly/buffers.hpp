@@ -10,22 +10,25 @@
 //
 // Test. Levels L_k: the mean of the colour channels (the first three). Each is moved to
 // y_k = cbrt(L_k), the Wilson-Hilferty transform that makes a gamma-like (positive, right
-// skewed) mean close to normal; every statistic is a ratio of y's, so brightness cancels (a
-// pixel at 0.01 and one at 10 are judged alike, as in local_test.hpp).
+// skewed) mean close to normal (odd: a negative pixel's law is taken as a positive one's
+// mirror); every statistic is a ratio of y's, so brightness cancels (a pixel at 0.01 and one
+// at 10 are judged alike, as in local_test.hpp).
 //   Noise. v = Var[y] / E[y]^2 of one buffer, pooled: each pixel's own estimate (the spread
 //   of its K y's, K - 1 degrees of freedom; with use_variance, the larger of that and the
 //   median over its buffers of Var[x_k] / x_k^2 / 9, the delta method on cbrt), then the
-//   median over the (2 radius + 1)^2 neighbourhood (robust to the fireflies in it), scaled
-//   from a median to a mean of chi-square(K - 1) / (K - 1) values (without use_variance).
-//   Never below the spread of the buffers the candidate is tested against (an edge or a
-//   highlight is noisier than its surroundings).
+//   median over the neighbours in the (2 radius + 1)^2 window that sit at the pixel's level
+//   (its law: a small highlight noisier than its surroundings is judged by its own pixels;
+//   levels are the lower half's mean y, which fireflies do not move; see pooled_noise),
+//   scaled from a median to a mean of chi-square(K - 1) / (K - 1) values (without
+//   use_variance). Never below the spread of the buffers the candidate is tested against.
 //   Step-down (Rosner's order): sorted y_(1) >= ... >= y_(K); for i from floor(K / 2) down
 //   to 1, the i-th highest against R, the buffers below it (never itself, nor the ones above):
 //       T_i = (y_(i) - mean_R y) / (mean_R y sqrt(v (1 + 1 / |R|)))
 //   the largest i with T_i > t_df(q / C(K, i - 1)) flags the top i buffers (a second firefly
 //   above the tested one cannot mask it; C(K, i - 1): Bonferroni over the buffers set aside).
-//   df = (2 / pi) (2 radius + 1)^2 (K - 1), the pooled median's degrees of freedom. A pixel
-//   whose R agree exactly (v = 0, e.g. black) flags any buffer above them.
+//   df = (2 / pi) n (K - 1), the pooled median's degrees of freedom over its n estimates
+//   (thresholds per n). A pixel whose R agree exactly (v = 0, e.g. black) flags any buffer
+//   above them.
 // Promise, per frame (fdr.hpp): a frame without fireflies gets no flag at all in at least
 // 1 - alpha of cases (the generalized ESD's promise), and with fireflies at most alpha of the
 // flagged pixels are expected clean. Each pixel's p-value is the smallest over its steps of
@@ -45,16 +48,21 @@
 // rebuilt, the spread alone 0.19% (its caustic fireflies included).
 // Measured, relMSE against the reference (../shared/data/cycles-caustics-seeds, 8 Cycles
 // renders of 16 samples, no variance; 128 samples in all): mean 0.496; K = 4 (2 renders per
-// buffer): median of means 0.0326, G-MoN (best threshold) 0.0321, this 0.0199 (0.0249 without
-// the energy return); K = 8: median of means 0.0242, G-MoN 0.0230, this 0.0182 (0.0234). The
-// simulator, 1024x540 (docs/accuracy.md), this / G-MoN at its best: caustics K = 4 0.034 /
-// 0.133, K = 8 0.029 / 0.086; interior K = 4 0.034 / 0.061, K = 8 0.016 / 0.042; a frame
+// buffer): median of means 0.0326, G-MoN (best threshold) 0.0321, this 0.0215 (0.0249 without
+// the energy return, before the noise was pooled by level); K = 8: median of means 0.0242,
+// G-MoN 0.0230, this 0.0179 (0.0234). The simulator, 1024x540 (docs/accuracy.md), this /
+// G-MoN at its best: caustics K = 4 0.032 / 0.133, K = 8 0.032 / 0.086; interior K = 4
+// 0.039 / 0.061, K = 8 0.019 / 0.042; a frame
 // without fireflies: unchanged, the mean's 0.00093582 at K = 4. How the result grows with K
 // and what each K costs: docs/k_study.md.
-// Highlights: a firefly on a highlight is rebuilt, rightly, which the simulator's
-// highlight_kept counts as a highlight lost (caustics 0.95, interior 0.92-0.94 kept, not lowered).
+// Highlights: a firefly on a highlight is rebuilt, rightly (the energy return then adds to
+// it); highlight pixels not lowered below their input less their fireflies: 0.99-1.0 on the
+// simulated caustics, highlights and production scenes at K = 4 and 8 (0.977-0.99 before the
+// noise was pooled by level; tests: small noisy highlights kept).
 // Not promised: heavy-tailed (lognormal) per-sample laws, as local_test.hpp: the interior
-// scene changes 0.1-0.26% of its clean pixel-buffers at q = 1e-4.
+// scene changes 0.1-0.26% of its clean pixel-buffers at q = 1e-4 (its bright patch: 0.977 not
+// lowered at K = 8); pixels whose buffers straddle 0 (the cube root is steep there: 2-3% of
+// such pixel-buffers flagged in the tests).
 //
 // The paper's rules for two halves, for K:
 //   "an outlier in both halves is a highlight, kept"  -> a pixel where all buffers, or all
@@ -190,6 +198,44 @@ struct cross_thresholds {
     }
 };
 
+// The pooled estimate's degrees of freedom: a median of n estimates of K - 1 degrees of
+// freedom each (efficiency 2 / pi against their mean).
+inline double pooled_df(int n, int k) noexcept { return std::max(1.0, 2.0 / pi * n * (k - 1)); }
+
+// The step thresholds for every pool size n = 1..pool (the pixels that joined a pixel's
+// pooled noise), each at its own degrees of freedom; only the sizes asked for are filled.
+struct threshold_table {
+    std::vector<cross_thresholds> by_n;  // index n - 1
+    std::vector<std::uint8_t> filled;
+    double q = -1;
+    int k = 0;
+    void fill(double q_, int k_, int pool, const std::vector<std::uint8_t>& wanted) {
+        if (q_ != q || k_ != k || static_cast<int>(by_n.size()) != pool) {
+            q = q_;
+            k = k_;
+            by_n.assign(static_cast<std::size_t>(pool), cross_thresholds{});
+            filled.assign(static_cast<std::size_t>(pool), 0);
+        }
+        for (int n = 1; n <= pool; ++n)
+            if (wanted[static_cast<std::size_t>(n - 1)] && !filled[static_cast<std::size_t>(n - 1)]) {
+                by_n[static_cast<std::size_t>(n - 1)].fill(q, k, pooled_df(n, k));
+                filled[static_cast<std::size_t>(n - 1)] = 1;
+            }
+    }
+    const cross_thresholds& at(int n) const noexcept { return by_n[static_cast<std::size_t>(n - 1)]; }
+};
+
+// A pixel's level: the mean y of the lower half of its usable buffers (the highest first:
+// the last ceil(usable / 2)), which the step-down never flags, so its fireflies do not move
+// it. NaN without a usable buffer.
+inline double lower_level(const pixel_buffers& p) noexcept {
+    const int u = p.usable, half = (u + 1) / 2;
+    if (u == 0) return std::numeric_limits<double>::quiet_NaN();
+    double sum = 0;
+    for (int j = u - half; j < u; ++j) sum += p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])];
+    return sum / half;
+}
+
 inline double median_of(double* v, int n) noexcept {
     std::sort(v, v + n);
     return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
@@ -220,7 +266,7 @@ inline double pixel_noise(const pixel_buffers& p, bool with_variance) noexcept {
         const double d = p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])] - mean;
         ss += d * d;
     }
-    return mean > 0 ? ss / (p.usable - 1) / (mean * mean) : nan;
+    return mean != 0 ? ss / (p.usable - 1) / (mean * mean) : nan;
 }
 
 // The relative variance of y among order[i..usable) (R, mean given): their spread, or with
@@ -237,7 +283,7 @@ inline double rest_noise(const pixel_buffers& p, int i, double mean, bool with_v
         if (std::isfinite(p.rel_var[b])) r[static_cast<std::size_t>(m++)] = p.rel_var[b];
     }
     if (with_variance) return m == 0 ? std::numeric_limits<double>::quiet_NaN() : median_of(r.data(), m) / 9.0;
-    return n >= 2 && mean > 0 ? ss / (n - 1) / (mean * mean) : std::numeric_limits<double>::quiet_NaN();
+    return n >= 2 && mean != 0 ? ss / (n - 1) / (mean * mean) : std::numeric_limits<double>::quiet_NaN();
 }
 
 // Step i of the step-down: the i-th highest buffer against the mean of the ones below it, in
@@ -250,10 +296,15 @@ inline double step_statistic(const pixel_buffers& p, int i, double noise, bool w
     const double mean = sum / n;
     const double yc = p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(i - 1)])];
     if (!(yc > mean)) return std::numeric_limits<double>::quiet_NaN();
+    if (mean == 0) {  // no level to be relative to: only R that agree exactly (black) judge
+        for (int j = i; j < p.usable; ++j)
+            if (p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])] != 0) return std::numeric_limits<double>::quiet_NaN();
+        return HUGE_VAL;
+    }
     // Never below R's own noise: an edge or a highlight is noisier than its surroundings,
     // and the buffers below the candidate say so.
     const double own = rest_noise(p, i, mean, with_variance);
-    const double s = mean * std::sqrt(std::max(noise, own >= 0 ? own : 0.0) * (1.0 + 1.0 / n));
+    const double s = std::fabs(mean) * std::sqrt(std::max(noise, own >= 0 ? own : 0.0) * (1.0 + 1.0 / n));
     return s > 0 ? (yc - mean) / s : HUGE_VAL;
 }
 
@@ -313,7 +364,7 @@ public:
     // Work memory kept between frames, bytes (the K = 2 detector's included).
     std::size_t scratch_bytes() const noexcept {
         return (noise_.capacity() + log_p_.capacity() + excess_.capacity() + row_returned_.capacity()) *
-                   sizeof(double) +
+                   sizeof(double) + level_.capacity() * sizeof(float) +
                energy_.bytes() + pair_.scratch_bytes();
     }
 
@@ -404,14 +455,11 @@ private:
         if (k == 2) return run_pair(b, masks, clean, rep);
         const bool has_var = !b[0].variance.empty();
         const bool with_var = has_var && (k <= 3 || options_.use_variance);
-        const int window = 2 * options_.radius + 1;
-        // The pooled estimate: a median of window^2 estimates of K - 1 degrees of freedom
-        // each (efficiency 2 / pi against their mean).
-        const double df = std::max(1.0, 2.0 / detail::pi * window * window * (k - 1));
-        if (thresholds_.q != options_.false_alarm || thresholds_.k != k || thresholds_.df != df)
-            thresholds_.fill(options_.false_alarm, k, df);
+        const int window = 2 * options_.radius + 1, pool = window * window;
+        thresholds_.fill(options_.false_alarm, k, pool, std::vector<std::uint8_t>(static_cast<std::size_t>(pool), 1));
         const int h = b[0].color.height();
         noise_.resize(rep.pixels);
+        level_.resize(rep.pixels);
         if (returns_energy(b, k, clean)) excess_.assign(rep.pixels * 3, 0.0);
         else excess_.clear();
         exec_.run(static_cast<std::size_t>(h), [&](std::size_t y) {
@@ -419,11 +467,11 @@ private:
         });
         std::vector<row_counts> counts(static_cast<std::size_t>(h), row_counts(k));
         exec_.run(static_cast<std::size_t>(h), [&](std::size_t y) {
-            find_row(b, k, masks, has_var, with_var, df, static_cast<int>(y), counts[y]);
+            find_row(b, k, masks, has_var, with_var, static_cast<int>(y), counts[y]);
         });
         rep.tested = 0;
         for (const row_counts& c : counts) rep.tested += c.tested;
-        set_frame_level(counts, rep.tested, k, df);
+        set_frame_level(counts, rep.tested, k, pool);
         exec_.run(static_cast<std::size_t>(h), [&](std::size_t y) {
             decide_row(b, k, masks, clean, has_var, with_var, static_cast<int>(y), counts[y]);
         });
@@ -435,7 +483,7 @@ private:
             rep.left += c.left;
             for (int i = 0; i < k; ++i) rep.per_buffer[static_cast<std::size_t>(i)] += c.per_buffer[static_cast<std::size_t>(i)];
         }
-        rep.level = frame_.q;
+        rep.level = frame_q_;
         if (clean && rep.left > 0)
             rep.error = status{errc::no_valid_pixels, "pixels with more than half of the buffers non-finite were left"};
         return rep;
@@ -470,6 +518,7 @@ private:
     struct candidate {
         int x = 0;
         double log_p = 0;
+        int pool = 0;  // the pixels its pooled noise came from
     };
     struct row_counts {
         explicit row_counts(int k) : per_buffer(static_cast<std::size_t>(k), 0) {}
@@ -498,11 +547,11 @@ private:
                 fin += v - v;
                 sd += std::sqrt(std::max(v, 0.0));
             }
-            const double rel = (sd / ncol) / p.level[s];
-            if (p.level[s] > 0 && std::isfinite(rel)) p.rel_var[s] = rel * rel;
+            const double rel = (sd / ncol) / std::fabs(p.level[s]);
+            if (p.level[s] != 0 && std::isfinite(rel)) p.rel_var[s] = rel * rel;
         }
         p.finite[s] = fin == 0.0 && std::isfinite(p.level[s]);
-        p.y[s] = std::cbrt(std::max(p.level[s], 0.0));
+        p.y[s] = std::cbrt(p.level[s]);  // odd: a negative pixel's law is a positive one's mirror
         p.flagged[s] = !p.finite[s];
     }
 
@@ -531,7 +580,8 @@ private:
         sort_buffers(b, x, y, p);
     }
 
-    // Pass 1: every pixel's own noise (before anything is rebuilt).
+    // Pass 1: every pixel's own noise and level (before anything is rebuilt); unknown (NaN)
+    // for a pixel that is not tested.
     template <class C, class V>
     void noise_row(const buffer_view<C, V>* b, int k, bool has_var, bool with_var, int y) {
         detail::pixel_buffers p;
@@ -539,28 +589,70 @@ private:
         const int w = b[0].color.width();
         for (int x = 0; x < w; ++x) {
             gather(b, k, x, y, has_var, p);
-            noise_[static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)] =
-                detail::pixel_noise(p, with_var);
+            const std::size_t i = index(x, y, w);
+            noise_[i] = detail::pixel_noise(p, with_var);
+            level_[i] = static_cast<float>(detail::lower_level(p));
         }
     }
 
-    // The pooled noise at (x, y): the median of the window's known estimates, scaled from a
-    // median to a mean of chi-square(K - 1) / (K - 1) estimates (Wilson-Hilferty median;
-    // with variance the estimates have many degrees of freedom: no scale).
-    double pooled_noise(int x, int y, int w, int h, int k, bool with_var) const {
-        std::array<double, 17 * 17> v{};
-        int n = 0;
-        const int r = options_.radius;
-        for (int j = std::max(0, y - r); j <= std::min(h - 1, y + r); ++j)
-            for (int i = std::max(0, x - r); i <= std::min(w - 1, x + r); ++i) {
-                const double e = noise_[static_cast<std::size_t>(j) * static_cast<std::size_t>(w) + static_cast<std::size_t>(i)];
-                if (e >= 0) v[static_cast<std::size_t>(n++)] = e;
-            }
-        if (n == 0) return std::numeric_limits<double>::quiet_NaN();
-        const double med = detail::median_of(v.data(), n);
+    // A median of relative variances scaled to a mean of chi-square(K - 1) / (K - 1)
+    // estimates (Wilson-Hilferty median; with variance they have many degrees of freedom:
+    // no scale).
+    static double median_noise(double* v, int n, int k, bool with_var) noexcept {
+        const double med = detail::median_of(v, n);
         if (with_var) return med;
         const double d = 2.0 / (9.0 * (k - 1)), m = 1.0 - d;
         return med / (m * m * m);
+    }
+
+    // The pixel's own noise without its highest buffer (a firefly there would inflate it): the
+    // relative variance of the others (0 when unknown).
+    static double own_rest(const detail::pixel_buffers& p, bool with_var) {
+        if (p.usable < 3) return 0.0;
+        double sum = 0;
+        for (int j = 1; j < p.usable; ++j) sum += p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])];
+        const double v = detail::rest_noise(p, 1, sum / (p.usable - 1), with_var);
+        return v >= 0 ? v : 0.0;
+    }
+
+    struct pooled {
+        double noise = 0;
+        int n = 0;  // the estimates it came from
+    };
+
+    // The pooled noise at (x, y). A pixel's noise is that of its own law, which a neighbour
+    // shares only at the same level: the median of the known estimates of the neighbours at
+    // the pixel's level (a small highlight, noisier than its surroundings, is judged by its own
+    // pixels' spread). Its own estimate is left out (its fireflies inflate it; the step-down
+    // floors the noise at the spread of the buffers below the candidate instead). A neighbour
+    // joins when its level m_q (lower_level) is within 3 standard deviations of the pixel's
+    // m_p: (m_q - m_p)^2 <= 9 (pi / 2) (v_p m_p^2 + v_q m_q^2) / K (a median of K varies ~pi / 2
+    // times their mean; the lower half's mean alike), v_q the neighbour's estimate, v_p the
+    // pixel's without its highest buffer (vp), each at least the window's (the median of all
+    // its estimates). In a smooth region almost every neighbour joins. With fewer than 2 (a
+    // pixel unlike its neighbours) its law is unknown: the window's noise.
+    pooled pooled_noise(int x, int y, int w, int h, int k, bool with_var, double vp) const {
+        std::array<double, 17 * 17> all{}, near{};
+        int n = 0, joined = 0;
+        const int r = options_.radius;
+        const std::size_t self = index(x, y, w);
+        for (int j = std::max(0, y - r); j <= std::min(h - 1, y + r); ++j)
+            for (int i = std::max(0, x - r); i <= std::min(w - 1, x + r); ++i)
+                if (noise_[index(i, j, w)] >= 0) all[static_cast<std::size_t>(n++)] = noise_[index(i, j, w)];
+        if (n == 0) return {std::numeric_limits<double>::quiet_NaN(), 0};
+        const double window_noise = median_noise(all.data(), n, k, with_var);
+        const double mp = level_[self], sp = std::max(window_noise, vp) * mp * mp;  // m_p's variance x K / (pi / 2)
+        auto same_level = [&](std::size_t q) {
+            const double mq = level_[q], d = mq - mp;
+            return d * d <= 9.0 * (detail::pi / 2.0) / k * (sp + std::max(window_noise, noise_[q]) * mq * mq);
+        };
+        for (int j = std::max(0, y - r); j <= std::min(h - 1, y + r); ++j)
+            for (int i = std::max(0, x - r); i <= std::min(w - 1, x + r); ++i) {
+                const std::size_t q = index(i, j, w);
+                if (q != self && noise_[q] >= 0 && same_level(q)) near[static_cast<std::size_t>(joined++)] = noise_[q];
+            }
+        if (joined < 2) return {window_noise, n};
+        return {median_noise(near.data(), joined, k, with_var), joined};
     }
 
     // Pass 2: every pixel judged at the cap level (false_alarm); those flagged, with their
@@ -568,7 +660,7 @@ private:
     // here for the pixels pass 3 does not visit.
     template <class C, class V>
     void find_row(const buffer_view<C, V>* b, int k, const image_view<std::uint8_t>* masks, bool has_var,
-                  bool with_var, double df, int y, row_counts& rc) {
+                  bool with_var, int y, row_counts& rc) {
         detail::pixel_buffers p;
         p.k = k;
         const int w = b[0].color.width();
@@ -581,12 +673,12 @@ private:
                 write_masks(masks, p, x, y);
                 continue;
             }
+            const pooled pn = pooled_noise(x, y, w, b[0].color.height(), k, with_var, own_rest(p, with_var));
             if (p.usable >= 3) ++rc.tested;
-            const double noise = pooled_noise(x, y, w, b[0].color.height(), k, with_var);
-            if (detail::judge_pixel(p, noise, with_var, thresholds_) > 0)
-                rc.found.push_back({x, detail::pixel_log_p(p, noise, with_var, df)});
+            if (pn.n > 0 && detail::judge_pixel(p, pn.noise, with_var, thresholds_.at(pn.n)) > 0)
+                rc.found.push_back({x, detail::pixel_log_p(p, pn.noise, with_var, detail::pooled_df(pn.n, k)), pn.n});
             else if (bad > 0)
-                rc.found.push_back({x, 0.0});
+                rc.found.push_back({x, 0.0, 0});
             else
                 write_masks(masks, p, x, y);
         }
@@ -594,18 +686,25 @@ private:
 
     // The frame's level (fdr.hpp): Benjamini-Hochberg at alpha over the tested pixels, never
     // above the cap. Thresholds for pass 3 at that level.
-    void set_frame_level(const std::vector<row_counts>& counts, std::size_t tested, int k, double df) {
+    // Thresholds for the pool sizes of the kept candidates only.
+    void set_frame_level(const std::vector<row_counts>& counts, std::size_t tested, int k, int pool) {
         log_p_.clear();
         for (const row_counts& c : counts)
             for (const candidate& f : c.found)
                 if (f.log_p < 0) log_p_.push_back(f.log_p);
         frame_log_p_ = bh_log_threshold(log_p_, tested, options_.alpha);
-        if (frame_log_p_ == -HUGE_VAL) return frame_.fill(0, k, df);  // nothing kept: q = 0 flags nothing
+        frame_q_ = 0;
+        if (frame_log_p_ == -HUGE_VAL) return;  // nothing kept: pass 3 judges no candidate
+        std::vector<std::uint8_t> wanted(static_cast<std::size_t>(pool), 0);
+        for (const row_counts& c : counts)
+            for (const candidate& f : c.found)
+                if (f.log_p < 0 && f.log_p <= frame_log_p_) wanted[static_cast<std::size_t>(f.pool - 1)] = 1;
         // Below 1e-300 the thresholds stop growing; every candidate kept is far past them. A
         // hair above the kept p-value: the quantile and the tail invert each other only to
         // rounding, and the candidate at the level itself must pass.
         const double q = std::max(std::min(std::exp(frame_log_p_) * (1 + 1e-6), options_.false_alarm), 1e-300);
-        if (frame_.q != q || frame_.k != k || frame_.df != df) frame_.fill(q, k, df);
+        frame_.fill(q, k, pool, wanted);
+        frame_q_ = q;
     }
 
     // Pass 3: the candidates again, judged at the frame's level, masks written, rebuilt.
@@ -620,9 +719,8 @@ private:
             gather(b, k, x, y, has_var, p);
             const int bad = k - p.usable;
             const bool kept = f.log_p < 0 && f.log_p <= frame_log_p_;
-            const int flags = kept ? detail::judge_pixel(p, pooled_noise(x, y, w, b[0].color.height(), k, with_var),
-                                                         with_var, frame_)
-                                   : 0;
+            const pooled pn = kept ? pooled_noise(x, y, w, b[0].color.height(), k, with_var, own_rest(p, with_var)) : pooled{};
+            const int flags = kept ? detail::judge_pixel(p, pn.noise, with_var, frame_.at(pn.n)) : 0;
             rc.fireflies += static_cast<std::size_t>(flags);
             rc.nonfinite += static_cast<std::size_t>(bad);
             for (int i = 0; i < k; ++i) rc.per_buffer[static_cast<std::size_t>(i)] += p.flagged[static_cast<std::size_t>(i)];
@@ -726,11 +824,13 @@ private:
     cross_buffer_options options_;
     executor exec_;
     detector pair_;
-    detail::cross_thresholds thresholds_{};  // at the cap level, false_alarm
-    detail::cross_thresholds frame_{};       // at the frame's level (fdr.hpp)
+    detail::threshold_table thresholds_{};  // at the cap level, false_alarm, every pool size
+    detail::threshold_table frame_{};       // at the frame's level (fdr.hpp)
     double frame_log_p_ = 0;                 // log of the largest p-value kept
+    double frame_q_ = 0;                     // the frame's level (0: nothing kept)
     std::vector<double> log_p_;              // the candidates' p-values (log), for the level
     std::vector<double> noise_;  // per pixel: its own relative variance of y (NaN: unknown)
+    std::vector<float> level_;   // per pixel: the median of its buffers' y (NaN: not tested)
     std::vector<double> excess_;        // energy return: what was removed, 3 channels per pixel
     std::vector<double> row_returned_;  // energy return: what was given back, per row
 
