@@ -685,8 +685,7 @@ private:
     }
 
     // The frame's level (fdr.hpp): Benjamini-Hochberg at alpha over the tested pixels, never
-    // above the cap. Thresholds for pass 3 at that level.
-    // Thresholds for the pool sizes of the kept candidates only.
+    // above the cap. Thresholds for pass 3 at that level, for the kept candidates' pool sizes.
     void set_frame_level(const std::vector<row_counts>& counts, std::size_t tested, int k, int pool) {
         log_p_.clear();
         for (const row_counts& c : counts)
