@@ -308,3 +308,30 @@ TEST_CASE("energy return, coarse scale: sparse fireflies' light comes back evenl
     CHECK(peak > 0.15);  // 0.5 x 0.25 / 0.5 x the Gaussian's share of the patch (0.75): 0.19
     CHECK(far < 0.005 * peak);
 }
+
+TEST_CASE("energy return: whole rows give energy_at's bits, and -0 excess gives +0's", "[energy][invariant]") {
+    for (const energy_scales sigma : {energy_scales(3.0), energy_scales(4.0, 16.0)}) {
+        energy_case e(150, 47, 13);
+        for (int y = 0; y < e.h; ++y)  // the patch and every 9th row: rows and stretches without excess
+            for (int x = 0; x < e.w; ++x)
+                if (y % 9 != 0 && (std::abs(x - e.w / 3) > 4 || std::abs(y - e.h / 2) > 4))
+                    for (std::size_t c = 0; c < 3; ++c) e.excess[static_cast<std::size_t>(y * e.w + x) * 3 + c] = 0.0;
+        std::vector<double> returned, again;
+        energy_scratch s;
+        energy_return(e.excess, e.shape, e.w, e.h, sigma, returned, s, executor::threads(2));
+        std::size_t differ = 0;
+        for (int y = 0; y < e.h; ++y)
+            for (int x = 0; x < e.w; ++x) {
+                double add[3];
+                energy_at(s, x, y, add);
+                differ += std::memcmp(add, &returned[static_cast<std::size_t>(y * e.w + x) * 3], sizeof add) != 0;
+            }
+        CHECK(differ == 0);
+        CHECK(*std::max_element(returned.begin(), returned.end()) > 0.0);
+        std::vector<double> negative_zero = e.excess;
+        for (double& v : negative_zero)
+            if (v == 0.0) v = -0.0;
+        energy_return(negative_zero, e.shape, e.w, e.h, sigma, again, s, executor{});
+        CHECK(std::memcmp(returned.data(), again.data(), returned.size() * sizeof(double)) == 0);
+    }
+}

@@ -101,13 +101,25 @@ inline int node_step(double sigma) {
     return s;
 }
 
+// The record of the model's sums at a pixel or node: M (3 channels), L (3), V, and (coarse
+// scale only, else 0) the relative V: the sum of w^2 |e|^2 / |P|^2.
+inline constexpr int record = 8;
+
 // Gaussian tap weights for one node parity: offsets d (integer node) or d + 1/2 (a node
 // between pixels), d = 0..r; normalised so that the taps on both sides sum to 1. `sq`: the
-// weights squared, for the sum of squared weights of the James-Stein factor.
+// weights squared, for the sum of squared weights of the James-Stein factor. `rec`: each tap's
+// weights of a record's values (w on M and L, sq on V and the relative V), record after record:
+// one weight per value lets the sums run on whole records at a time (they vectorise).
 struct tap_weights {
-    std::vector<double> w, sq;
+    std::vector<double> w, sq, rec;
     bool half = false;
 };
+
+inline void set_record_weights(tap_weights& t) {
+    t.rec.resize(t.w.size() * record);
+    for (std::size_t d = 0; d < t.w.size(); ++d)
+        for (std::size_t k = 0; k < record; ++k) t.rec[d * record + k] = k < 6 ? t.w[d] : t.sq[d];
+}
 
 inline tap_weights make_taps(double sigma, int r, bool half) {
     tap_weights t;
@@ -124,6 +136,7 @@ inline tap_weights make_taps(double sigma, int r, bool half) {
         t.w[d] /= sum;
         t.sq[d] = t.w[d] * t.w[d];
     }
+    set_record_weights(t);
     return t;
 }
 
@@ -136,10 +149,6 @@ inline tap_pair taps_at(int p2, int d, bool half, int n) noexcept {
     const int lo = (p2 - o2) / 2, hi = (p2 + o2) / 2;  // p2 -+ o2 is even
     return {p2 - o2 >= 0 && lo < n ? lo : -1, hi >= 0 && hi < n ? hi : -1};
 }
-
-// The record of the model's sums at a pixel or node: M (3 channels), L (3), V, and (coarse
-// scale only, else 0) the relative V: the sum of w^2 |e|^2 / |P|^2.
-inline constexpr int record = 8;
 
 // The median of 3 values.
 inline double median3(double a, double b, double c) noexcept {
@@ -155,7 +164,8 @@ inline double median3(double a, double b, double c) noexcept {
 template <class T, class FillRow>
 inline void median3x3_rows(FillRow&& fill_row, std::vector<T>& out, int w, int h, const executor& exec) {
     // a median past the range of T (a float profile of a 2 FLT_MAX sum) is kept at its largest
-    auto put = [](double v) { return static_cast<T>(std::min(v, static_cast<double>(std::numeric_limits<T>::max()))); };
+    auto largest = [](double v) { return std::min(v, static_cast<double>(std::numeric_limits<T>::max())); };
+    auto put = [&](double v) { return static_cast<T>(largest(v)); };
     const std::size_t n = static_cast<std::size_t>(w) * 3;
     out.resize(n * static_cast<std::size_t>(h));
     // Bands of rows as tasks; in a band each input row is made once, into a ring of three
@@ -163,7 +173,7 @@ inline void median3x3_rows(FillRow&& fill_row, std::vector<T>& out, int w, int h
     // allocator returns it to the system).
     constexpr int band = 16;
     exec.run(static_cast<std::size_t>((h + band - 1) / band), [&](std::size_t bi) {
-        thread_local std::vector<double> ring, lo, mid, hi;
+        thread_local std::vector<double> ring, lo, mid, hi, median;
         ring.resize(3 * n);
         auto line = [&](int yy) { return &ring[static_cast<std::size_t>(yy % 3) * n]; };
         const int first = static_cast<int>(bi) * band, last = std::min(h, first + band);
@@ -188,21 +198,23 @@ inline void median3x3_rows(FillRow&& fill_row, std::vector<T>& out, int w, int h
                     for (int c = 0; c < 3; ++c) o[static_cast<std::size_t>(x) * 3 + static_cast<std::size_t>(c)] = put(edge(x, c));
                 continue;
             }
-            lo.resize(n), mid.resize(n), hi.resize(n);  // each column of 3, sorted
+            lo.resize(n), mid.resize(n), hi.resize(n), median.resize(n);  // each column of 3, sorted
             const double* up = line(y - 1);
             const double* here = line(y);
             const double* down = line(y + 1);
+            // (loops split so that each vectorises: few arrays to check for overlap, one type)
             for (std::size_t i = 0; i < n; ++i) {
-                const double a = std::min(up[i], here[i]), b = std::max(up[i], here[i]);
-                lo[i] = std::min(a, down[i]);
-                hi[i] = std::max(b, down[i]);
-                mid[i] = std::max(a, std::min(b, down[i]));
+                lo[i] = std::min(std::min(up[i], here[i]), down[i]);
+                hi[i] = std::max(std::max(up[i], here[i]), down[i]);
             }
+            for (std::size_t i = 0; i < n; ++i)
+                mid[i] = std::max(std::min(up[i], here[i]), std::min(std::max(up[i], here[i]), down[i]));
             for (std::size_t i = 3; i + 3 < n; ++i) {
                 const double l = std::max(std::max(lo[i - 3], lo[i]), lo[i + 3]);
                 const double u = std::min(std::min(hi[i - 3], hi[i]), hi[i + 3]);
-                o[i] = put(median3(l, median3(mid[i - 3], mid[i], mid[i + 3]), u));
+                median[i] = largest(median3(l, median3(mid[i - 3], mid[i], mid[i + 3]), u));
             }
+            for (std::size_t i = 3; i + 3 < n; ++i) o[i] = static_cast<T>(median[i]);
             for (int c = 0; c < 3; ++c) {
                 o[c] = put(edge(0, c));
                 o[static_cast<std::size_t>(w - 1) * 3 + static_cast<std::size_t>(c)] = put(edge(w - 1, c));
@@ -248,161 +260,222 @@ inline double squared(const E* e) noexcept {
     return a * a + b * b + c * c;
 }
 
-// The record of one node along a line of the model's inputs (e: excess, 3 channels; pr:
-// profile, 3; e2: the sums of |e|^2 of a line that is itself a sum, or null: |e|^2 of e's
-// pixels; has_e false: e is all 0 and not read). Every value is taken to double before it is
-// added. Opposite taps are added first: a mirrored line gives the mirrored result bit for bit.
+// Where the removed excess is: per row, and per stretch of `chunk` pixels of a row, whether any
+// value is != 0. Elsewhere the M and V sums get terms of +-0, and a sum begun at +0 stays +0 bit
+// for bit under such terms (x + -0 = x; a sum reaches -0 only from -0 + -0): those terms are
+// skipped (or read as +0) with the same bits.
+struct excess_map {
+    static constexpr int chunk = 64;
+    std::size_t chunks = 0;                 // per row
+    std::vector<std::uint8_t> rows, parts;  // h; h x chunks
+    bool row(int y) const noexcept { return rows[static_cast<std::size_t>(y)] != 0; }
+    bool part(int y, std::size_t k) const noexcept { return parts[static_cast<std::size_t>(y) * chunks + k] != 0; }
+};
+
+template <class E>
+inline excess_map map_excess(const std::vector<E>& excess, int w, int h, const executor& exec) {
+    excess_map m;
+    m.chunks = static_cast<std::size_t>((w + excess_map::chunk - 1) / excess_map::chunk);
+    m.rows.assign(static_cast<std::size_t>(h), 0);
+    m.parts.assign(static_cast<std::size_t>(h) * m.chunks, 0);
+    const std::size_t n = static_cast<std::size_t>(w) * 3, c3 = excess_map::chunk * 3;
+    exec.run(m.rows.size(), [&](std::size_t y) {
+        const E* e = &excess[y * n];
+        for (std::size_t k = 0; k < m.chunks; ++k) {
+            const bool any = std::any_of(e + k * c3, e + std::min(n, (k + 1) * c3), [](E v) { return v != E(0); });
+            m.parts[y * m.chunks + k] = any ? 1 : 0;
+            m.rows[y] = m.rows[y] || any ? 1 : 0;
+        }
+    });
+    return m;
+}
+
+// Pixels x0..x1 of one row of the model's inputs as records (at out + x record): e (3
+// channels), the profile (3), |e|^2, 0; every value taken to double once. A row without excess
+// (has_e false) is not read: M = V = +0 (excess_map).
 template <class E, class P>
-inline void line_sums(int p2, const tap_weights& tw, int n, const E* e, const P* pr, const double* e2, bool has_e,
-                      double* o) {
-    double m[3] = {}, l[3] = {}, v = 0;
-    auto sq = [&](std::size_t q) { return e2 ? e2[q] : squared(e + q * 3); };
-    auto E_ = [&](std::size_t q) { return static_cast<double>(e[q]); };
-    auto P_ = [&](std::size_t q) { return static_cast<double>(pr[q]); };
-    for (std::size_t d = 0; d < tw.w.size(); ++d) {
-        const tap_pair p = taps_at(p2, static_cast<int>(d), tw.half, n);
-        if (p.lo < 0 && p.hi < 0) continue;  // a node outside the frame: no centre pixel
-        const double wd = tw.w[d];
-        const std::size_t lo = static_cast<std::size_t>(p.lo), hi = static_cast<std::size_t>(p.hi);
-        if (d == 0 && !tw.half) {  // the centre tap: counted once
-            for (std::size_t c = 0; c < 3; ++c) {
-                l[c] += wd * P_(lo * 3 + c);
-                if (has_e) m[c] += wd * E_(lo * 3 + c);
-            }
-            if (has_e) v += tw.sq[d] * sq(lo);
-        } else if (p.lo >= 0 && p.hi >= 0) {
-            for (std::size_t c = 0; c < 3; ++c) {
-                l[c] += wd * (P_(lo * 3 + c) + P_(hi * 3 + c));
-                if (has_e) m[c] += wd * (E_(lo * 3 + c) + E_(hi * 3 + c));
-            }
-            if (has_e) v += tw.sq[d] * (sq(lo) + sq(hi));
-        } else {  // one side outside the frame: x + 0
-            const std::size_t q = p.lo >= 0 ? lo : hi;
-            for (std::size_t c = 0; c < 3; ++c) {
-                l[c] += wd * (P_(q * 3 + c) + 0.0);
-                if (has_e) m[c] += wd * (E_(q * 3 + c) + 0.0);
-            }
-            if (has_e) v += tw.sq[d] * (sq(q) + 0.0);
+inline void input_records(const E* e, const P* pr, bool has_e, int x0, int x1, double* out) noexcept {
+    for (int x = x0; x <= x1; ++x) {
+        const std::size_t q = static_cast<std::size_t>(x) * 3;
+        double* o = out + static_cast<std::size_t>(x) * record;
+        for (std::size_t c = 0; c < 3; ++c) {
+            o[c] = has_e ? static_cast<double>(e[q + c]) : 0.0;
+            o[3 + c] = static_cast<double>(pr[q + c]);
+        }
+        o[6] = has_e ? squared(e + q) : 0.0;
+        o[7] = 0.0;
+    }
+}
+
+// One tap of record_sums into sum, with the tap's record weights wk. Opposite taps are added
+// first (a + b): a mirrored line gives the mirrored result bit for bit.
+inline void add_tap(double* sum, const double* wk, const double* a) noexcept {  // the centre
+    for (int k = 0; k < record; ++k) sum[k] += wk[k] * a[k];
+}
+inline void add_tap(double* sum, const double* wk, const double* a, const double* b) noexcept {
+    for (int k = 0; k < record; ++k) sum[k] += wk[k] * (a[k] + b[k]);
+}
+inline constexpr double zero_record[record] = {};  // the side of a tap outside the frame: x + 0
+
+// The record at node p2 along a line of n records (record i at line + i stride): the separable
+// Gaussian's taps over M and L, the squared taps over V, each value taken in double.
+inline void record_sums(int p2, const tap_weights& tw, int n, const double* line, std::size_t stride,
+                        double* out) noexcept {
+    double sum[record] = {};
+    auto rec = [&](int i) { return line + static_cast<std::size_t>(i) * stride; };
+    auto wk = [&](std::size_t d) { return &tw.rec[d * record]; };
+    const int r = static_cast<int>(tw.w.size()) - 1, half = tw.half ? 1 : 0;
+    const int lo = (p2 - half) / 2, hi = (p2 + half) / 2;  // tap 0's pixels (p2 - half is even)
+    if (lo - r >= 0 && hi + r < n) {  // every tap inside the line (most nodes): no tests
+        const double *a = rec(lo), *b = rec(hi);
+        std::size_t d = 0;
+        if (!tw.half) add_tap(sum, wk(0), a), d = 1;  // the centre: counted once
+        for (; d < tw.w.size(); ++d) add_tap(sum, wk(d), a - d * stride, b + d * stride);
+    } else {
+        for (std::size_t d = 0; d < tw.w.size(); ++d) {
+            const tap_pair p = taps_at(p2, static_cast<int>(d), tw.half, n);
+            if (p.lo < 0 && p.hi < 0) continue;  // a node outside the frame: no centre pixel
+            if (d == 0 && !tw.half)
+                add_tap(sum, wk(d), rec(p.lo));
+            else if (p.lo >= 0 && p.hi >= 0)
+                add_tap(sum, wk(d), rec(p.lo), rec(p.hi));
+            else
+                add_tap(sum, wk(d), rec(p.lo >= 0 ? p.lo : p.hi), zero_record);
         }
     }
-    for (int c = 0; c < 3; ++c) {
-        o[c] = m[c];
-        o[3 + c] = l[c];
-    }
-    o[6] = v;
-    o[7] = 0.0;
+    std::copy_n(sum, record, out);
 }
 
-// The sums along one axis at node p2 of a column of records (stride record values; `at(i)`
-// gives record i or null outside): the same arithmetic as line_sums, over records.
-template <class At>
-inline void record_sums(int p2, const tap_weights& tw, int n, At&& at, double* sum) {
-    for (int k = 0; k < record; ++k) sum[k] = 0.0;
-    for (std::size_t d = 0; d < tw.w.size(); ++d) {
-        const tap_pair p = taps_at(p2, static_cast<int>(d), tw.half, n);
-        if (p.lo < 0 && p.hi < 0) continue;
-        const double wk[record] = {tw.w[d], tw.w[d], tw.w[d], tw.w[d], tw.w[d], tw.w[d], tw.sq[d], tw.sq[d]};
-        const double* a = p.lo >= 0 ? at(p.lo) : nullptr;
-        const double* b = p.hi >= 0 ? at(p.hi) : nullptr;
-        if (d == 0 && !tw.half)  // the centre tap: counted once
-            for (int k = 0; k < record; ++k) sum[k] += wk[k] * a[k];
-        else if (a && b)
-            for (int k = 0; k < record; ++k) sum[k] += wk[k] * (a[k] + b[k]);
-        else  // one side outside the frame: x + 0, as in line_sums
-            for (int k = 0; k < record; ++k) sum[k] += wk[k] * ((a ? a : b)[k] + 0.0);
-    }
-}
-
-// x first, a band of node columns at a time: every row's records at the band's columns (a
-// row with no removed excess has M = V = 0 without a sum; the row's stretch under the band is
-// read once for all of them), then along y at the node rows. Nothing frame-sized.
+// x first, a band of node columns at a time: every row's records at the band's columns (the
+// row's stretch under the band taken to records once for all of them), then along y at the
+// node rows. Nothing frame-sized.
 template <class E, class P>
-inline void energy_x_then_y(const std::vector<E>& excess, const std::vector<P>& profile, int w, int h,
-                            const node_axis& ax, const node_axis& ay, const tap_weights (&t)[2], energy_scratch& s,
-                            const executor& exec) {
+inline void energy_x_then_y(const std::vector<E>& excess, const std::vector<P>& profile, const excess_map& where,
+                            int w, int h, const node_axis& ax, const node_axis& ay, const tap_weights (&t)[2],
+                            energy_scratch& s, const executor& exec) {
     const std::size_t nx = static_cast<std::size_t>(ax.count), hh = static_cast<std::size_t>(h);
-    std::vector<std::uint8_t> has_e(hh, 0);
-    exec.run(hh, [&](std::size_t y) {
-        const E* e = &excess[y * static_cast<std::size_t>(w) * 3];
-        for (std::size_t i = 0; i < static_cast<std::size_t>(w) * 3; ++i)
-            if (e[i] != E(0)) {
-                has_e[y] = 1;
-                break;
-            }
-    });
-    constexpr std::size_t band = 16;
+    const int reach = static_cast<int>(t[0].w.size());  // pixels from a node to its last tap, at most
+    constexpr std::size_t band = 32;
     s.xy.resize(static_cast<std::size_t>(ay.count) * nx * record);
     exec.run((nx + band - 1) / band, [&](std::size_t bi) {
         const std::size_t j0 = bi * band, j1 = std::min(nx, j0 + band);
-        thread_local std::vector<double> columns;  // per thread, kept (see median3x3_rows)
+        const int x0 = std::max(0, ax.pos2(static_cast<int>(j0)) / 2 - reach);
+        const int x1 = std::min(w - 1, ax.pos2(static_cast<int>(j1 - 1)) / 2 + reach);
+        thread_local std::vector<double> line, columns;  // per thread, kept (see median3x3_rows)
+        line.resize(static_cast<std::size_t>(w) * record);
         columns.resize((j1 - j0) * hh * record);
         for (std::size_t y = 0; y < hh; ++y) {
             const std::size_t at = y * static_cast<std::size_t>(w) * 3;
+            input_records(&excess[at], &profile[at], where.row(static_cast<int>(y)), x0, x1, line.data());
             for (std::size_t j = j0; j < j1; ++j) {
                 const int p2 = ax.pos2(static_cast<int>(j));
-                line_sums(p2, t[(p2 & 1) != 0], w, &excess[at], &profile[at], nullptr, has_e[y] != 0,
-                          &columns[((j - j0) * hh + y) * record]);
+                record_sums(p2, t[(p2 & 1) != 0], w, line.data(), record, &columns[((j - j0) * hh + y) * record]);
             }
         }
-        for (std::size_t j = j0; j < j1; ++j) {
-            const double* column = &columns[(j - j0) * hh * record];
+        for (std::size_t j = j0; j < j1; ++j)
             for (int i = 0; i < ay.count; ++i) {
                 const int q2 = ay.pos2(i);
-                record_sums(q2, t[(q2 & 1) != 0], h, [&](int y) { return column + static_cast<std::size_t>(y) * record; },
+                record_sums(q2, t[(q2 & 1) != 0], h, &columns[(j - j0) * hh * record], record,
                             &s.xy[(static_cast<std::size_t>(i) * nx + j) * record]);
             }
-        }
     });
 }
 
-// y first: at each node row, the sums along y for every column (whole rows at a time: it
-// vectorises), then along x at the node columns. With x first, the two orders a transposed
-// frame swaps.
-template <class E, class P>
-inline void energy_y_then_x(const std::vector<E>& excess, const std::vector<P>& profile, int w, int h,
-                            const node_axis& ax, const node_axis& ay, const tap_weights (&t)[2], energy_scratch& s,
-                            const executor& exec) {
-    const std::size_t nx = static_cast<std::size_t>(ax.count), row = nx * record;
-    const std::size_t n3 = static_cast<std::size_t>(w) * 3, n1 = static_cast<std::size_t>(w);
-    s.yx.resize(static_cast<std::size_t>(ay.count) * row);
-    exec.run(static_cast<std::size_t>(ay.count), [&](std::size_t i) {
-        const int p2 = ay.pos2(static_cast<int>(i));
-        const tap_weights& tw = t[(p2 & 1) != 0];
-        thread_local std::vector<double> m, l, v;  // per thread, kept (see median3x3_rows)
-        m.assign(n3, 0.0), l.assign(n3, 0.0), v.assign(n1, 0.0);
-        // one row of `src` (n3 values a row) into `dst`, weighted wd, in double
-        auto add = [&](std::vector<double>& dst, const auto& src, double wd, const tap_pair& p, bool centre) {
-            const auto* a = p.lo >= 0 ? &src[static_cast<std::size_t>(p.lo) * n3] : nullptr;
-            const auto* b = p.hi >= 0 ? &src[static_cast<std::size_t>(p.hi) * n3] : nullptr;
-            if (centre)
-                for (std::size_t q = 0; q < n3; ++q) dst[q] += wd * static_cast<double>(a[q]);
-            else if (a && b)
-                for (std::size_t q = 0; q < n3; ++q) dst[q] += wd * (static_cast<double>(a[q]) + static_cast<double>(b[q]));
+// Values q0..q1 of one row of sums along y (dst) at a node's tap p, weighted wd, from the rows
+// `row(y)` of a source, each value taken to double. Whole rows at a time: it vectorises.
+template <class Row>
+inline void add_rows(double* dst, std::size_t q0, std::size_t q1, Row&& row, double wd, const tap_pair& p,
+                     bool centre) {
+    const auto* a = p.lo >= 0 ? row(p.lo) : nullptr;
+    const auto* b = p.hi >= 0 ? row(p.hi) : nullptr;
+    if (centre)
+        for (std::size_t q = q0; q < q1; ++q) dst[q] += wd * static_cast<double>(a[q]);
+    else if (a && b)
+        for (std::size_t q = q0; q < q1; ++q) dst[q] += wd * (static_cast<double>(a[q]) + static_cast<double>(b[q]));
+    else
+        for (std::size_t q = q0; q < q1; ++q) dst[q] += wd * (static_cast<double>((a ? a : b)[q]) + 0.0);
+}
+
+// |e|^2 of rows y0..y1 of the excess (row y at out + (y - y0) w), +0 where there is none.
+template <class E>
+inline void squares(const std::vector<E>& excess, const excess_map& where, int w, int y0, int y1,
+                    std::vector<double>& out) {
+    const std::size_t n1 = static_cast<std::size_t>(w);
+    out.resize(static_cast<std::size_t>(y1 - y0 + 1) * n1);
+    for (int y = y0; y <= y1; ++y)
+        for (std::size_t k = 0; k < where.chunks; ++k) {
+            const std::size_t x0 = k * excess_map::chunk, x1 = std::min(n1, x0 + excess_map::chunk);
+            double* o = &out[static_cast<std::size_t>(y - y0) * n1];
+            const E* e = &excess[static_cast<std::size_t>(y) * n1 * 3];
+            if (!where.part(y, k)) std::fill(o + x0, o + x1, 0.0);
             else
-                for (std::size_t q = 0; q < n3; ++q) dst[q] += wd * (static_cast<double>((a ? a : b)[q]) + 0.0);
-        };
-        // the same for |e|^2, squared as it is read
-        auto add_sq = [&](double wd, const tap_pair& p, bool centre) {
-            const E* a = p.lo >= 0 ? &excess[static_cast<std::size_t>(p.lo) * n3] : nullptr;
-            const E* b = p.hi >= 0 ? &excess[static_cast<std::size_t>(p.hi) * n3] : nullptr;
-            if (centre)
-                for (std::size_t q = 0; q < n1; ++q) v[q] += wd * squared(a + q * 3);
-            else if (a && b)
-                for (std::size_t q = 0; q < n1; ++q) v[q] += wd * (squared(a + q * 3) + squared(b + q * 3));
-            else
-                for (std::size_t q = 0; q < n1; ++q) v[q] += wd * (squared((a ? a : b) + q * 3) + 0.0);
-        };
-        for (std::size_t d = 0; d < tw.w.size(); ++d) {
-            const tap_pair p = taps_at(p2, static_cast<int>(d), tw.half, h);
-            if (p.lo < 0 && p.hi < 0) continue;
-            const bool centre = d == 0 && !tw.half;
-            add(m, excess, tw.w[d], p, centre);
-            add(l, profile, tw.w[d], p, centre);
-            add_sq(tw.sq[d], p, centre);
+                for (std::size_t x = x0; x < x1; ++x) o[x] = squared(e + x * 3);
         }
-        for (int j = 0; j < ax.count; ++j) {
-            const int q2 = ax.pos2(j);
-            line_sums(q2, t[(q2 & 1) != 0], w, m.data(), l.data(), v.data(), true, &s.yx[i * row + static_cast<std::size_t>(j) * record]);
+}
+
+// The sums along y at node row p2 (taps tw) for every column, as records in `line`: L from every
+// tap's rows, M and V (|e|^2 from e2, rows from y0 on) only from the stretches holding excess.
+template <class E, class P>
+inline void y_sums(int p2, const tap_weights& tw, int w, int h, const std::vector<E>& excess,
+                   const std::vector<P>& profile, const excess_map& where, const std::vector<double>& e2, int y0,
+                   std::vector<double>& line) {
+    const std::size_t n3 = static_cast<std::size_t>(w) * 3, n1 = static_cast<std::size_t>(w);
+    auto excess_row = [&](int y) { return &excess[static_cast<std::size_t>(y) * n3]; };
+    auto profile_row = [&](int y) { return &profile[static_cast<std::size_t>(y) * n3]; };
+    auto e2_row = [&](int y) { return &e2[static_cast<std::size_t>(y - y0) * n1]; };
+    auto has_excess = [&](const tap_pair& p, std::size_t k) {
+        return (p.lo >= 0 && where.part(p.lo, k)) || (p.hi >= 0 && where.part(p.hi, k));
+    };
+    thread_local std::vector<double> m, l, v;  // per thread, kept (see median3x3_rows)
+    m.assign(n3, 0.0), l.assign(n3, 0.0), v.assign(n1, 0.0);
+    for (std::size_t d = 0; d < tw.w.size(); ++d) {
+        const tap_pair p = taps_at(p2, static_cast<int>(d), tw.half, h);
+        if (p.lo < 0 && p.hi < 0) continue;
+        const bool centre = d == 0 && !tw.half;
+        add_rows(l.data(), 0, n3, profile_row, tw.w[d], p, centre);
+        for (std::size_t k = 0; k < where.chunks; ++k) {
+            if (!has_excess(p, k)) continue;
+            const std::size_t x0 = k * excess_map::chunk, x1 = std::min(n1, x0 + excess_map::chunk);
+            add_rows(m.data(), x0 * 3, x1 * 3, excess_row, tw.w[d], p, centre);
+            add_rows(v.data(), x0, x1, e2_row, tw.sq[d], p, centre);
+        }
+    }
+    line.resize(n1 * record);
+    for (std::size_t x = 0; x < n1; ++x) {
+        double* o = &line[x * record];
+        for (std::size_t c = 0; c < 3; ++c) {
+            o[c] = m[x * 3 + c];
+            o[3 + c] = l[x * 3 + c];
+        }
+        o[6] = v[x];
+        o[7] = 0.0;
+    }
+}
+
+// y first, a band of node rows at a time (|e|^2 of the rows they reach taken once): at each
+// node row the sums along y for every column, then along x at the node columns. With x first,
+// the two orders a transposed frame swaps.
+template <class E, class P>
+inline void energy_y_then_x(const std::vector<E>& excess, const std::vector<P>& profile, const excess_map& where,
+                            int w, int h, const node_axis& ax, const node_axis& ay, const tap_weights (&t)[2],
+                            energy_scratch& s, const executor& exec) {
+    const std::size_t nx = static_cast<std::size_t>(ax.count), ny = static_cast<std::size_t>(ay.count);
+    const int reach = static_cast<int>(t[0].w.size());  // pixels from a node to its last tap, at most
+    constexpr std::size_t band = 8;
+    s.yx.resize(ny * nx * record);
+    exec.run((ny + band - 1) / band, [&](std::size_t bi) {
+        const std::size_t i0 = bi * band, i1 = std::min(ny, i0 + band);
+        const int y0 = std::max(0, ay.pos2(static_cast<int>(i0)) / 2 - reach);
+        const int y1 = std::min(h - 1, ay.pos2(static_cast<int>(i1 - 1)) / 2 + reach);
+        thread_local std::vector<double> e2, line;  // per thread, kept (see median3x3_rows)
+        squares(excess, where, w, y0, y1, e2);
+        for (std::size_t i = i0; i < i1; ++i) {
+            const int p2 = ay.pos2(static_cast<int>(i));
+            y_sums(p2, t[(p2 & 1) != 0], w, h, excess, profile, where, e2, y0, line);
+            for (std::size_t j = 0; j < nx; ++j) {
+                const int q2 = ax.pos2(static_cast<int>(j));
+                record_sums(q2, t[(q2 & 1) != 0], w, line.data(), record, &s.yx[(i * nx + j) * record]);
+            }
         }
     });
 }
@@ -414,55 +487,56 @@ inline tap_weights box_taps(int half) {
     tap_weights t;
     t.w.assign(static_cast<std::size_t>(half) + 1, 1.0);
     t.sq = t.w;
+    set_record_weights(t);
     return t;
 }
 
 // Box sums of every cell: excess (3), profile (3), |e|^2, |e|^2 / |P|^2 (P the profile; 0 where
 // it is 0); the mean of both orders.
 template <class E, class P>
-inline void cell_sums(const std::vector<E>& excess, const std::vector<P>& profile, int w, int h,
-                      const cell_axis& cx, const cell_axis& cy, std::vector<double>& cells, const executor& exec) {
+inline void cell_sums(const std::vector<E>& excess, const std::vector<P>& profile, const excess_map& where,
+                      int w, int h, const cell_axis& cx, const cell_axis& cy, std::vector<double>& cells,
+                      const executor& exec) {
     const std::size_t ncx = static_cast<std::size_t>(cx.count), hw = static_cast<std::size_t>(cx.width / 2);
+    const std::size_t n = static_cast<std::size_t>(w) * record;  // a row of records
     cells.assign(static_cast<std::size_t>(cy.count) * ncx * record, 0.0);
     exec.run(static_cast<std::size_t>(cy.count), [&](std::size_t jy) {
         thread_local std::vector<double> px, rows, cols;
         const int c0 = cy.centre2(static_cast<int>(jy)) / 2, y0 = c0 - static_cast<int>(hw);
         const int wc = cy.width;
-        px.assign(static_cast<std::size_t>(wc) * static_cast<std::size_t>(w) * record, 0.0);
-        for (int r = 0; r < wc; ++r) {  // the band's pixels as records
+        px.resize(static_cast<std::size_t>(wc) * n);
+        for (int r = 0; r < wc; ++r) {  // the band's pixels as records (0 outside the frame)
             const int y = y0 + r;
-            if (y < 0 || y >= h) continue;
-            for (int x = 0; x < w; ++x) {
-                const std::size_t q = (static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)) * 3;
-                double* o = &px[(static_cast<std::size_t>(r) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)) * record];
-                for (std::size_t c = 0; c < 3; ++c) {
-                    o[c] = static_cast<double>(excess[q + c]);
-                    o[3 + c] = static_cast<double>(profile[q + c]);
-                }
-                o[6] = squared(&excess[q]);
+            if (y < 0 || y >= h) {
+                std::fill_n(&px[static_cast<std::size_t>(r) * n], n, 0.0);
+                continue;
+            }
+            const std::size_t at = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) * 3;
+            double* line = &px[static_cast<std::size_t>(r) * n];
+            input_records(&excess[at], &profile[at], where.row(y), 0, w - 1, line);
+            for (std::size_t x = 0; x < static_cast<std::size_t>(w); ++x) {
+                double* o = line + x * record;
                 if (!(o[6] > 0)) continue;  // o[7] stays 0
                 const double p2 = o[3] * o[3] + o[4] * o[4] + o[5] * o[5];  // relative: |e|^2 / |P|^2
                 o[7] = p2 > 0 ? std::min(o[6] / p2, DBL_MAX) : 0.0;
             }
         }
-        auto pixel = [&](int r, int x) { return &px[(static_cast<std::size_t>(r) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)) * record]; };
         const tap_weights box = box_taps(static_cast<int>(hw));
         // x first: each row of the band summed over each cell, then the rows
         rows.assign(static_cast<std::size_t>(wc) * ncx * record, 0.0);
         for (int r = 0; r < wc; ++r)
             for (std::size_t j = 0; j < ncx; ++j)
-                record_sums(cx.centre2(static_cast<int>(j)), box, w, [&](int x) { return pixel(r, x); },
+                record_sums(cx.centre2(static_cast<int>(j)), box, w, &px[static_cast<std::size_t>(r) * n], record,
                             &rows[(static_cast<std::size_t>(r) * ncx + j) * record]);
         // y first: each column summed over the band's rows (rows outside the frame are 0
         // records here, so the band is summed whole: the same as skipping them), then the cells
-        cols.assign(static_cast<std::size_t>(w) * record, 0.0);
-        for (int x = 0; x < w; ++x)
-            record_sums(2 * static_cast<int>(hw), box, wc, [&](int r) { return pixel(r, x); },
-                        &cols[static_cast<std::size_t>(x) * record]);
+        cols.assign(n, 0.0);
+        for (std::size_t x = 0; x < static_cast<std::size_t>(w); ++x)
+            record_sums(2 * static_cast<int>(hw), box, wc, &px[x * record], n, &cols[x * record]);
         for (std::size_t j = 0; j < ncx; ++j) {
             double a[record], b[record];
-            record_sums(2 * static_cast<int>(hw), box, wc, [&](int r) { return &rows[(static_cast<std::size_t>(r) * ncx + j) * record]; }, a);
-            record_sums(cx.centre2(static_cast<int>(j)), box, w, [&](int x) { return &cols[static_cast<std::size_t>(x) * record]; }, b);
+            record_sums(2 * static_cast<int>(hw), box, wc, &rows[j * record], ncx * record, a);
+            record_sums(cx.centre2(static_cast<int>(j)), box, w, cols.data(), record, b);
             for (int k = 0; k < record; ++k) cells[(jy * ncx + j) * record + static_cast<std::size_t>(k)] = 0.5 * (a[k] + b[k]);
         }
     });
@@ -473,11 +547,12 @@ inline void cell_pass(const std::vector<double>& src, std::vector<double>& dst, 
                       bool along_x, const tap_weights& tw, const executor& exec) {
     dst.resize(src.size());
     const std::size_t lines = along_x ? ny : nx, n = along_x ? nx : ny;
+    const std::size_t stride = along_x ? record : nx * record;  // from one cell of a line to the next
     exec.run(lines, [&](std::size_t line) {
-        auto at = [&](std::size_t i) { return along_x ? (line * nx + i) * record : (i * nx + line) * record; };
+        const std::size_t first = along_x ? line * nx * record : line * record;
         for (std::size_t i = 0; i < n; ++i)
-            record_sums(2 * static_cast<int>(i), tw, static_cast<int>(n),
-                        [&](int j) { return &src[at(static_cast<std::size_t>(j))]; }, &dst[at(i)]);
+            record_sums(2 * static_cast<int>(i), tw, static_cast<int>(n), &src[first], stride,
+                        &dst[first + i * stride]);
     });
 }
 
@@ -509,11 +584,12 @@ inline cell_lerp cell_lerp_at(const cell_axis& a, int p2) noexcept {
 
 // Bilinear interpolation of four values f00 (x0, y0), f01 (x1, y0), f10, f11 with weights ax,
 // bx along x and ay, by along y, the mean of the two orders (x first, y first): flips and
-// transposes (which swap the weights) give the same bits.
+// transposes (which swap the weights) give the same bits. weighted_pair: one step, a fa + b fb.
+inline double weighted_pair(double a, double b, double fa, double fb) noexcept { return a * fa + b * fb; }
 inline double weighted_bilinear(double f00, double f01, double f10, double f11, double ax, double bx, double ay,
                                 double by) noexcept {
-    const double xy = ay * (ax * f00 + bx * f01) + by * (ax * f10 + bx * f11);
-    const double yx = ax * (ay * f00 + by * f10) + bx * (ay * f01 + by * f11);
+    const double xy = weighted_pair(ay, by, weighted_pair(ax, bx, f00, f01), weighted_pair(ax, bx, f10, f11));
+    const double yx = weighted_pair(ax, bx, weighted_pair(ay, by, f00, f10), weighted_pair(ay, by, f01, f11));
     return 0.5 * (xy + yx);
 }
 
@@ -608,6 +684,13 @@ inline node_lerp lerp_at(const node_axis& a, int x) noexcept {
     return {j, static_cast<double>(2 * x - a.pos2(j)) / (2.0 * a.step)};
 }
 
+// The light returned at a pixel of profile p where the interpolated factor is k (0 unless
+// positive and finite).
+inline double returned_light(double k, double p) noexcept {
+    const double v = k > 0 ? k * p : 0.0;
+    return std::isfinite(v) && v > 0 ? v : 0.0;
+}
+
 // Bilinear interpolation of the four nodes' values at fractions tx, ty (weighted_bilinear).
 inline double bilinear(double f00, double f01, double f10, double f11, double tx, double ty) noexcept {
     return weighted_bilinear(f00, f01, f10, f11, 1.0 - tx, tx, 1.0 - ty, ty);
@@ -633,8 +716,8 @@ namespace detail {
 // a quarter of sigma (interpolating a Gaussian between points a quarter of its width apart
 // errs by ~1/128 of its peak), the Gaussian over the cells sigma / width wide.
 template <class E>
-inline void coarse_model(const std::vector<E>& excess, int w, int h, const energy_scales& sc, const tap_weights& fine,
-                         energy_scratch& s, const executor& exec) {
+inline void coarse_model(const std::vector<E>& excess, const excess_map& where, int w, int h,
+                         const energy_scales& sc, const tap_weights& fine, energy_scratch& s, const executor& exec) {
     if (!(sc.coarse > sc.fine)) {
         s.cells.clear(), s.coarse.clear();
         return;
@@ -644,7 +727,7 @@ inline void coarse_model(const std::vector<E>& excess, int w, int h, const energ
     s.cy = make_cell_axis(h, width);
     const double sigma = sc.coarse / width;
     const tap_weights tw = make_taps(sigma, std::max(1, static_cast<int>(std::ceil(3.0 * sigma))), false);
-    cell_sums(excess, s.profile, w, h, s.cx, s.cy, s.cells, exec);
+    cell_sums(excess, s.profile, where, w, h, s.cx, s.cy, s.cells, exec);
     coarse_blur(s.cells, s.cx, s.cy, tw, s.coarse, exec);
     auto sum_sq = [](const tap_weights& t) {  // one axis, both sides
         double v = t.sq[0];
@@ -671,9 +754,10 @@ inline void energy_model_rows(const std::vector<E>& excess, ShapeRows&& shape_ro
     s.ax = detail::make_node_axis(w, step);
     s.ay = detail::make_node_axis(h, step);
     detail::median3x3_rows(shape_rows, s.profile, w, h, exec);
-    detail::energy_x_then_y(excess, s.profile, w, h, s.ax, s.ay, taps, s, exec);
-    detail::energy_y_then_x(excess, s.profile, w, h, s.ax, s.ay, taps, s, exec);
-    detail::coarse_model(excess, w, h, sc, taps[0], s, exec);
+    const detail::excess_map where = detail::map_excess(excess, w, h, exec);
+    detail::energy_x_then_y(excess, s.profile, where, w, h, s.ax, s.ay, taps, s, exec);
+    detail::energy_y_then_x(excess, s.profile, where, w, h, s.ax, s.ay, taps, s, exec);
+    detail::coarse_model(excess, where, w, h, sc, taps[0], s, exec);
     detail::energy_factors(s);
 }
 
@@ -695,19 +779,75 @@ inline void energy_at(const energy_scratch& s, int x, int y, double* add) noexce
         const double* f = s.factor.data() + c;
         const double k = detail::bilinear(f[(i0 * nx + j0) * 3], f[(i0 * nx + j1) * 3], f[(i1 * nx + j0) * 3],
                                           f[(i1 * nx + j1) * 3], lx.t, ly.t);
-        const double v = k > 0 ? k * static_cast<double>(s.profile[p + c]) : 0.0;
-        add[c] = std::isfinite(v) && v > 0 ? v : 0.0;
+        add[c] = detail::returned_light(k, s.profile[p + c]);
     }
 }
+
+namespace detail {
+// energy_at over whole rows, its operations regrouped (the same bits): the factors interpolated
+// along x on a node row once for all the rows it bounds, along y at the node columns once per
+// row; each pixel takes the last step of both orders.
+class energy_rows {
+public:
+    explicit energy_rows(const energy_scratch& s) : s_(s) {
+        for (int x = 0; x < s.ax.pixels; ++x) lx_.push_back(lerp_at(s.ax, x));
+        const std::size_t n = static_cast<std::size_t>(s.ax.pixels) * 3;
+        upper_.resize(n), lower_.resize(n), along_y_.resize(static_cast<std::size_t>(s.ax.count) * 3);
+    }
+
+    // energy_at of every pixel of row y: add[3 x + c]
+    void row(int y, double* add) {
+        const node_lerp ly = lerp_at(s_.ay, y);
+        const int i0 = ly.j, i1 = s_.ay.count > 1 ? i0 + 1 : i0;
+        if (i0 != i0_) {
+            if (i0 == i0_ + 1) std::swap(upper_, lower_), along_x(i1, lower_);
+            else along_x(i0, upper_), along_x(i1, lower_);
+            i0_ = i0;
+        }
+        const double ay = 1.0 - ly.t, by = ly.t;
+        const double* f0 = &s_.factor[static_cast<std::size_t>(i0) * along_y_.size()];
+        const double* f1 = &s_.factor[static_cast<std::size_t>(i1) * along_y_.size()];
+        for (std::size_t q = 0; q < along_y_.size(); ++q) along_y_[q] = weighted_pair(ay, by, f0[q], f1[q]);
+        const float* profile = &s_.profile[static_cast<std::size_t>(y) * upper_.size()];
+        for (std::size_t x = 0; x < lx_.size(); ++x) {
+            const std::size_t j0 = static_cast<std::size_t>(lx_[x].j), j1 = s_.ax.count > 1 ? j0 + 1 : j0;
+            const double ax = 1.0 - lx_[x].t, bx = lx_[x].t;
+            for (std::size_t c = 0; c < 3; ++c) {
+                const double xy = weighted_pair(ay, by, upper_[x * 3 + c], lower_[x * 3 + c]);
+                const double yx = weighted_pair(ax, bx, along_y_[j0 * 3 + c], along_y_[j1 * 3 + c]);
+                add[x * 3 + c] = returned_light(0.5 * (xy + yx), profile[x * 3 + c]);
+            }
+        }
+    }
+
+private:
+    void along_x(int i, std::vector<double>& out) const {  // node row i, interpolated at every pixel
+        const double* f = &s_.factor[static_cast<std::size_t>(i) * along_y_.size()];
+        for (std::size_t x = 0; x < lx_.size(); ++x) {
+            const std::size_t j0 = static_cast<std::size_t>(lx_[x].j), j1 = s_.ax.count > 1 ? j0 + 1 : j0;
+            const double ax = 1.0 - lx_[x].t, bx = lx_[x].t;
+            for (std::size_t c = 0; c < 3; ++c) out[x * 3 + c] = weighted_pair(ax, bx, f[j0 * 3 + c], f[j1 * 3 + c]);
+        }
+    }
+
+    const energy_scratch& s_;
+    std::vector<node_lerp> lx_;          // each pixel's node interval along x
+    std::vector<double> upper_, lower_;  // the factors along x on node rows i0_, i0_ + 1
+    std::vector<double> along_y_;        // the factors along y at the node columns (this row)
+    int i0_ = -2;                        // none yet
+};
+}  // namespace detail
 
 // The whole return as an image (3 interleaved channels, w x h) in `returned`.
 inline void energy_return(const std::vector<double>& excess, const std::vector<double>& shape, int w, int h,
                           energy_scales sigma, std::vector<double>& returned, energy_scratch& s, const executor& exec) {
     energy_model(excess, shape, w, h, sigma, s, exec);
     returned.resize(static_cast<std::size_t>(w) * static_cast<std::size_t>(h) * 3);
-    exec.run(static_cast<std::size_t>(h), [&](std::size_t y) {
-        for (int x = 0; x < w; ++x)
-            energy_at(s, x, static_cast<int>(y), &returned[(y * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)) * 3]);
+    constexpr int band = 16;
+    exec.run(static_cast<std::size_t>((h + band - 1) / band), [&](std::size_t bi) {
+        detail::energy_rows rows(s);
+        for (int y = static_cast<int>(bi) * band; y < std::min(h, static_cast<int>(bi + 1) * band); ++y)
+            rows.row(y, &returned[static_cast<std::size_t>(y) * static_cast<std::size_t>(w) * 3]);
     });
 }
 
@@ -770,13 +910,15 @@ energy_totals return_energy_to_image(const image_view<C>& color, const std::uint
             }
     };
     energy_model_rows(s.excess, shape_row, w, h, sigma, s, exec);
-    for (int y = 0; y < h; ++y)
+    detail::energy_rows rows(s);
+    std::vector<double> row_add(static_cast<std::size_t>(w) * 3);
+    for (int y = 0; y < h; ++y) {
+        rows.row(y, row_add.data());
         for (int x = 0; x < w; ++x) {
             const std::size_t p = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
             t.removed += (static_cast<double>(s.excess[p * 3]) + s.excess[p * 3 + 1] + s.excess[p * 3 + 2]) / 3.0;
             if (!keep[p]) continue;
-            double add[3];
-            energy_at(s, x, y, add);
+            const double* add = &row_add[static_cast<std::size_t>(x) * 3];
             const double mean_add = (add[0] + add[1] + add[2]) / 3.0;
             if (!(mean_add > 0)) continue;
             double old[3];
@@ -787,6 +929,7 @@ energy_totals return_energy_to_image(const image_view<C>& color, const std::uint
             t.returned += mean_add;
             if (added) added[p] = 1;
         }
+    }
     return t;
 }
 
