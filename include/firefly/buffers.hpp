@@ -798,26 +798,38 @@ private:
         energy_model_rows(excess_, shape_row, w, h, energy_scales(options_.energy_sigma, options_.energy_coarse_sigma),
                           energy_, exec_);
         row_returned_.assign(static_cast<std::size_t>(h), 0.0);
+        constexpr int band = 16;  // rows a task: the return read back row by row (energy_rows)
         if constexpr (!std::is_const_v<C>)
-            exec_.run(static_cast<std::size_t>(h), [&](std::size_t row) {
-                const int y = static_cast<int>(row);
-                for (int x = 0; x < w; ++x) {
-                    double add[3];
-                    energy_at(energy_, x, y, add);
-                    if (!(add[0] + add[1] + add[2] > 0)) continue;  // wherever positive (energy.hpp)
-                    // every buffer alike, or none where a sum does not fit a buffer's type
-                    double old[detail::max_buffers][3];
-                    bool fits = true;
-                    for (int i = 0; i < k; ++i) fits = add_light(b[i].color, x, y, add, old[i]) && fits;
-                    if (!fits) {
-                        for (int i = 0; i < k; ++i) restore_light(b[i].color, x, y, old[i], add);
-                        continue;
-                    }
-                    row_returned_[row] += (add[0] + add[1] + add[2]) / 3.0;
+            exec_.run(static_cast<std::size_t>((h + band - 1) / band), [&](std::size_t bi) {
+                detail::energy_rows rows(energy_);
+                std::vector<double> returned(static_cast<std::size_t>(w) * 3);
+                for (int y = static_cast<int>(bi) * band; y < std::min(h, static_cast<int>(bi + 1) * band); ++y) {
+                    rows.row(y, returned.data());
+                    give_back_row(b, k, y, returned.data());
                 }
             });
         for (std::size_t i = 0; i < excess_.size(); ++i) rep.energy_removed += excess_[i] / 3.0;
         for (const double r : row_returned_) rep.energy_returned += r;
+    }
+
+    // Row y's return (3 per pixel) added to every buffer alike, or to none where a sum does
+    // not fit a buffer's type.
+    template <class C, class V>
+    void give_back_row(const buffer_view<C, V>* b, int k, int y, const double* returned) {
+        const int w = b[0].color.width();
+        const std::size_t row = static_cast<std::size_t>(y);
+        for (int x = 0; x < w; ++x) {
+            const double* add = returned + static_cast<std::size_t>(x) * 3;
+            if (!(add[0] + add[1] + add[2] > 0)) continue;  // wherever positive (energy.hpp)
+            double old[detail::max_buffers][3];
+            bool fits = true;
+            for (int i = 0; i < k; ++i) fits = add_light(b[i].color, x, y, add, old[i]) && fits;
+            if (!fits) {
+                for (int i = 0; i < k; ++i) restore_light(b[i].color, x, y, old[i], add);
+                continue;
+            }
+            row_returned_[row] += (add[0] + add[1] + add[2]) / 3.0;
+        }
     }
 
     cross_buffer_options options_;
@@ -829,7 +841,7 @@ private:
     double frame_q_ = 0;                     // the frame's level (0: nothing kept)
     std::vector<double> log_p_;              // the candidates' p-values (log), for the level
     std::vector<double> noise_;  // per pixel: its own relative variance of y (NaN: unknown)
-    std::vector<float> level_;   // per pixel: the median of its buffers' y (NaN: not tested)
+    std::vector<float> level_;   // per pixel: lower_level, its buffers' lower half (NaN: none usable)
     std::vector<double> excess_;        // energy return: what was removed, 3 channels per pixel
     std::vector<double> row_returned_;  // energy return: what was given back, per row
 
