@@ -177,6 +177,8 @@ struct pixel_buffers {
     std::array<bool, max_buffers> finite{}, flagged{};
     std::array<int, max_buffers> order{};  // usable buffers, highest y first
     int usable = 0;
+    // y of the j-th highest usable buffer
+    double ranked_y(int j) const noexcept { return y[static_cast<std::size_t>(order[static_cast<std::size_t>(j)])]; }
 };
 
 // Thresholds of the step-down: step i tests the i-th highest buffer against the ones below
@@ -232,8 +234,15 @@ inline double lower_level(const pixel_buffers& p) noexcept {
     const int u = p.usable, half = (u + 1) / 2;
     if (u == 0) return std::numeric_limits<double>::quiet_NaN();
     double sum = 0;
-    for (int j = u - half; j < u; ++j) sum += p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])];
+    for (int j = u - half; j < u; ++j) sum += p.ranked_y(j);
     return sum / half;
+}
+
+// The mean y of the usable buffers from the i-th highest down (R of step i + 1; i = 0: all).
+inline double rest_mean(const pixel_buffers& p, int i) noexcept {
+    double sum = 0;
+    for (int j = i; j < p.usable; ++j) sum += p.ranked_y(j);
+    return sum / (p.usable - i);
 }
 
 inline double median_of(double* v, int n) noexcept {
@@ -259,11 +268,10 @@ inline double pixel_noise(const pixel_buffers& p, bool with_variance) noexcept {
         return std::isnan(given) ? spread : std::isnan(spread) ? given : std::max(given, spread);
     }
     if (p.usable < 2) return nan;
-    double sum = 0, ss = 0;
-    for (int j = 0; j < p.usable; ++j) sum += p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])];
-    const double mean = sum / p.usable;
+    const double mean = rest_mean(p, 0);
+    double ss = 0;
     for (int j = 0; j < p.usable; ++j) {
-        const double d = p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])] - mean;
+        const double d = p.ranked_y(j) - mean;
         ss += d * d;
     }
     return mean != 0 ? ss / (p.usable - 1) / (mean * mean) : nan;
@@ -291,14 +299,12 @@ inline double rest_noise(const pixel_buffers& p, int i, double mean, bool with_v
 // stand above them; +infinity when they agree exactly (no noise: any excess stands out).
 inline double step_statistic(const pixel_buffers& p, int i, double noise, bool with_variance) noexcept {
     const int n = p.usable - i;  // |R|
-    double sum = 0;
-    for (int j = i; j < p.usable; ++j) sum += p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])];
-    const double mean = sum / n;
-    const double yc = p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(i - 1)])];
+    const double mean = rest_mean(p, i);
+    const double yc = p.ranked_y(i - 1);
     if (!(yc > mean)) return std::numeric_limits<double>::quiet_NaN();
     if (mean == 0) {  // no level to be relative to: only R that agree exactly (black) judge
         for (int j = i; j < p.usable; ++j)
-            if (p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])] != 0) return std::numeric_limits<double>::quiet_NaN();
+            if (p.ranked_y(j) != 0) return std::numeric_limits<double>::quiet_NaN();
         return HUGE_VAL;
     }
     // Never below R's own noise: an edge or a highlight is noisier than its surroundings,
@@ -580,8 +586,8 @@ private:
         sort_buffers(b, x, y, p);
     }
 
-    // Pass 1: every pixel's own noise and level (before anything is rebuilt); unknown (NaN)
-    // for a pixel that is not tested.
+    // Pass 1: every pixel's own noise and level (before anything is rebuilt; NaN where they
+    // cannot be told).
     template <class C, class V>
     void noise_row(const buffer_view<C, V>* b, int k, bool has_var, bool with_var, int y) {
         detail::pixel_buffers p;
@@ -609,9 +615,7 @@ private:
     // relative variance of the others (0 when unknown).
     static double own_rest(const detail::pixel_buffers& p, bool with_var) {
         if (p.usable < 3) return 0.0;
-        double sum = 0;
-        for (int j = 1; j < p.usable; ++j) sum += p.y[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])];
-        const double v = detail::rest_noise(p, 1, sum / (p.usable - 1), with_var);
+        const double v = detail::rest_noise(p, 1, detail::rest_mean(p, 1), with_var);
         return v >= 0 ? v : 0.0;
     }
 
@@ -798,16 +802,8 @@ private:
         energy_model_rows(excess_, shape_row, w, h, energy_scales(options_.energy_sigma, options_.energy_coarse_sigma),
                           energy_, exec_);
         row_returned_.assign(static_cast<std::size_t>(h), 0.0);
-        constexpr int band = 16;  // rows a task: the return read back row by row (energy_rows)
         if constexpr (!std::is_const_v<C>)
-            exec_.run(static_cast<std::size_t>((h + band - 1) / band), [&](std::size_t bi) {
-                detail::energy_rows rows(energy_);
-                std::vector<double> returned(static_cast<std::size_t>(w) * 3);
-                for (int y = static_cast<int>(bi) * band; y < std::min(h, static_cast<int>(bi + 1) * band); ++y) {
-                    rows.row(y, returned.data());
-                    give_back_row(b, k, y, returned.data());
-                }
-            });
+            detail::for_each_energy_row(energy_, w, h, exec_, [&](int y, const double* add) { give_back_row(b, k, y, add); });
         for (std::size_t i = 0; i < excess_.size(); ++i) rep.energy_removed += excess_[i] / 3.0;
         for (const double r : row_returned_) rep.energy_returned += r;
     }

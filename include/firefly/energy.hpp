@@ -836,18 +836,30 @@ private:
     std::vector<double> along_y_;        // the factors along y at the node columns (this row)
     int i0_ = -2;                        // none yet
 };
+
+// energy_rows over bands of rows, a task a band: f(y, add) with row y's return, add[3 x + c].
+template <class F>
+inline void for_each_energy_row(const energy_scratch& s, int w, int h, const executor& exec, F&& f) {
+    constexpr int band = 16;
+    exec.run(static_cast<std::size_t>((h + band - 1) / band), [&](std::size_t bi) {
+        energy_rows rows(s);
+        std::vector<double> add(static_cast<std::size_t>(w) * 3);
+        for (int y = static_cast<int>(bi) * band; y < std::min(h, static_cast<int>(bi + 1) * band); ++y) {
+            rows.row(y, add.data());
+            f(y, add.data());
+        }
+    });
+}
 }  // namespace detail
 
 // The whole return as an image (3 interleaved channels, w x h) in `returned`.
 inline void energy_return(const std::vector<double>& excess, const std::vector<double>& shape, int w, int h,
                           energy_scales sigma, std::vector<double>& returned, energy_scratch& s, const executor& exec) {
     energy_model(excess, shape, w, h, sigma, s, exec);
-    returned.resize(static_cast<std::size_t>(w) * static_cast<std::size_t>(h) * 3);
-    constexpr int band = 16;
-    exec.run(static_cast<std::size_t>((h + band - 1) / band), [&](std::size_t bi) {
-        detail::energy_rows rows(s);
-        for (int y = static_cast<int>(bi) * band; y < std::min(h, static_cast<int>(bi + 1) * band); ++y)
-            rows.row(y, &returned[static_cast<std::size_t>(y) * static_cast<std::size_t>(w) * 3]);
+    const std::size_t row = static_cast<std::size_t>(w) * 3;
+    returned.resize(row * static_cast<std::size_t>(h));
+    detail::for_each_energy_row(s, w, h, exec, [&](int y, const double* add) {
+        std::copy_n(add, row, &returned[static_cast<std::size_t>(y) * row]);
     });
 }
 
