@@ -30,6 +30,17 @@ struct frame_k {
     }
 };
 
+// One frame-sized mask per buffer and the views the detector writes them through.
+struct masks_k {
+    std::vector<std::vector<std::uint8_t>> mem;
+    std::vector<image_view<std::uint8_t>> views;
+    masks_k(int k, int w, int h) : mem(static_cast<std::size_t>(k), std::vector<std::uint8_t>(static_cast<std::size_t>(w * h))) {
+        for (auto& m : mem) views.push_back(*make_image_view(m.data(), w, h));
+    }
+    masks_k(const masks_k&) = delete;  // the views point into mem
+    masks_k& operator=(const masks_k&) = delete;
+};
+
 frame_k from_sim(const sim::buffers& f) {
     frame_k r;
     r.w = f.width;
@@ -150,14 +161,13 @@ TEST_CASE("K buffers: a firefly in one buffer is removed, nothing else moves", "
             const std::size_t at = (8 * 24 + 12) * 3;
             for (int c = 0; c < 3; ++c) f.color[1][at + static_cast<std::size_t>(c)] *= 40.0f;
             const frame_k before = f;
-            std::vector<std::vector<std::uint8_t>> mem(static_cast<std::size_t>(k), std::vector<std::uint8_t>(24 * 16));
-            std::vector<image_view<std::uint8_t>> masks;
-            for (auto& m : mem) masks.push_back(*make_image_view(m.data(), 24, 16));
+            masks_k mk(k, 24, 16);
+            const auto& mem = mk.mem;
             cross_buffer_options o;
             o.use_variance = var;
             o.return_energy = false;  // the rebuild alone (the energy return: tests below)
             cross_buffer_detector d(o);
-            const cross_buffer_report r = d.process(f.views(var), masks);
+            const cross_buffer_report r = d.process(f.views(var), mk.views);
             REQUIRE(r.ok());
             CHECK(mem[1][8 * 24 + 12] == mask_bits::firefly);
             CHECK(r.per_buffer[1] >= 1);
@@ -466,9 +476,8 @@ namespace {
 // neighbourhood's. Returns the number of spot pixel-buffers flagged.
 std::size_t flagged_on_noisy_spots(int k, bool var, std::uint64_t seed) {
     frame_k f = noisy_frame(k, 96, 64, seed);
-    std::vector<std::vector<std::uint8_t>> mem(static_cast<std::size_t>(k), std::vector<std::uint8_t>(96 * 64));
-    std::vector<image_view<std::uint8_t>> masks;
-    for (auto& m : mem) masks.push_back(*make_image_view(m.data(), 96, 64));
+    masks_k mk(k, 96, 64);
+    const auto& mem = mk.mem;
     std::vector<std::size_t> spot;
     for (int sy = 4; sy + 2 < 64; sy += 8)
         for (int sx = 4; sx + 2 < 96; sx += 8)
@@ -487,7 +496,7 @@ std::size_t flagged_on_noisy_spots(int k, bool var, std::uint64_t seed) {
     cross_buffer_options o;
     o.use_variance = var;
     cross_buffer_detector d(o);
-    const cross_buffer_report r = d.detect(f.views(var), masks);
+    const cross_buffer_report r = d.detect(f.views(var), mk.views);
     REQUIRE(r.ok());
     std::size_t flagged = 0;
     for (const auto& m : mem)
@@ -530,13 +539,12 @@ TEST_CASE("K buffers: negative pixels' noise is kept, a firefly on them removed"
         const std::size_t at = (8 * 24 + 12) * 3;
         for (int c = 0; c < 3; ++c) f.color[1][at + static_cast<std::size_t>(c)] = 50.0f;
         const frame_k before = f;
-        std::vector<std::vector<std::uint8_t>> mem(static_cast<std::size_t>(k), std::vector<std::uint8_t>(24 * 16));
-        std::vector<image_view<std::uint8_t>> masks;
-        for (auto& m : mem) masks.push_back(*make_image_view(m.data(), 24, 16));
+        masks_k mk(k, 24, 16);
+        const auto& mem = mk.mem;
         cross_buffer_options o;
         o.return_energy = false;
         cross_buffer_detector d(o);
-        const cross_buffer_report r = d.process(f.views(false), masks);
+        const cross_buffer_report r = d.process(f.views(false), mk.views);
         REQUIRE(r.ok());
         CHECK(mem[1][8 * 24 + 12] == mask_bits::firefly);
         std::size_t changed = 0;
