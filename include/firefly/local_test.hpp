@@ -335,6 +335,32 @@ inline pooled_estimate pooled_relative_variance(const std::vector<float> (&rel_v
     return e;
 }
 
+// The median over the neighbourhood (centre excluded) of each neighbour's lower half level
+// (mean colour): a firefly lands in one half of a pixel, rarely in both, so the lower half
+// is clean where a quarter of the neighbours' halves carry one (a median over the halves
+// themselves is pulled up there), at the cost of a known bias on clean pixels (the caller's).
+// NaN when fewer than min_count neighbours have both halves usable.
+inline double neighbourhood_lower_level(const std::vector<double> (&level)[2], int w, int h, int x, int y,
+                                        int radius, int min_count, std::vector<float>& pool) {
+    pool.clear();
+    const int x0 = std::max(x - radius, 0), x1 = std::min(x + radius, w - 1);
+    const int y0 = std::max(y - radius, 0), y1 = std::min(y + radius, h - 1);
+    for (int yy = y0; yy <= y1; ++yy)
+        for (int xx = x0; xx <= x1; ++xx) {
+            if (xx == x && yy == y) continue;
+            const std::size_t j = static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(xx);
+            const double a = level[0][j], b = level[1][j];
+            if (a == a && b == b) pool.push_back(static_cast<float>(std::min(a, b)));
+        }
+    if (pool.empty() || pool.size() < static_cast<std::size_t>(std::max(min_count, 1)))
+        return std::numeric_limits<double>::quiet_NaN();
+    const std::size_t n = pool.size(), k = n / 2;
+    std::nth_element(pool.begin(), pool.begin() + static_cast<std::ptrdiff_t>(k), pool.end());
+    const double hi = pool[k];
+    if (n % 2) return hi;
+    return 0.5 * (static_cast<double>(*std::max_element(pool.begin(), pool.begin() + static_cast<std::ptrdiff_t>(k))) + hi);
+}
+
 // The statistic for the half whose level is hi against lo (hi > lo > 0), with r~ = r:
 // T = sqrt(m / 2) (sqrt(hi / lo) - sqrt(lo / hi)), m = 1 / r. The square roots are taken
 // separately so that 1e30 against 1e-3 stays finite.

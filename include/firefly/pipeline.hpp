@@ -561,7 +561,7 @@ private:
         const int w = hb[0]->color.width(), hgt = hb[0]->color.height();
         const double l_out = mean_colour(hb[h]->color, x, y), l_other = mean_colour(hb[1 - h]->color, x, y);
         const double v = reduced_variance(hb[1 - h]->variance, x, y);
-        const double v_other = noise_floor(x, y, w, hgt, v, l_other, cal, pool);
+        const double v_other = noise_floor(x, y, w, hgt, v, l_other, l_out, cal, pool);
         if (!exceeds_other_half(options_.highlight, l_out, l_other, v_other, cal)) return std::numeric_limits<double>::quiet_NaN();
         double log_p = normal_log_upper_tail(excess_z(l_out, l_other, v_other, cal));
         if (options_.local_test) {
@@ -733,17 +733,30 @@ private:
 
     // The other half's variance at (x, y), but never below what its neighbourhood's typical
     // relative variance (the median over both halves, the pixel left out; local_test.hpp)
-    // predicts at its level: one pixel's variance from few heavy-tailed samples is often far
-    // too low, and a noisy pixel would then "exceed" its other half. The median, not the
-    // mean-corrected estimate: fireflies around the pixel inflate the spread that corrects it.
+    // predicts at the pixel's level: one pixel's variance from few heavy-tailed samples is
+    // often far too low, and a noisy pixel would then "exceed" its other half. The median, not
+    // the mean-corrected estimate: fireflies around the pixel inflate the spread that corrects
+    // it. The level is the neighbourhood's median level (both halves), held between the
+    // other half's level and the outlier's: without a firefly both halves are noisy draws
+    // around the same value, and a pair far apart by chance has its low half below that value
+    // (at the low half's level, noise that scales with the level is underestimated: a bright,
+    // noisy beam without a single firefly had 12 pixels "exceed" their other half at z > 5);
+    // a firefly on a smooth region leaves the median at the other half's level (power kept);
+    // at an edge or on detail the clamp keeps the level within the pixel's own two values.
     // Renderer units, like v.
-    double noise_floor(int x, int y, int w, int h, double v, double level, double calibration,
+    double noise_floor(int x, int y, int w, int h, double v, double l_other, double l_out, double calibration,
                        std::vector<float>& pool) const {
         const local_test_scratch& ls = local_scratch_;
         if (!options_.local_test || ls.rel_var[0].empty() || !(calibration > 0)) return v;
         const detail::pooled_estimate e = detail::pooled_relative_variance(
             ls.rel_var, w, h, x, y, options_.local.radius, options_.local.min_neighbours, pool);
         if (!(e.nu == e.nu)) return v;  // too few neighbours: the pixel's own variance
+        double level = l_other;
+        const double t = e.typical;
+        const double around = detail::neighbourhood_lower_level(ls.level, w, h, x, y, options_.local.radius,
+                                                                (options_.local.min_neighbours + 1) / 2, pool) *
+                              std::exp(std::min(0.5449521356 * std::sqrt(t) + 0.5 * t, 700.0));
+        if (around > l_other) level = std::min(around, std::max(l_out, l_other));
         return std::max(v, e.typical * level * level / calibration);
     }
 
