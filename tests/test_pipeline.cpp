@@ -435,6 +435,17 @@ TEST_CASE("random frames: no NaN out, unmarked pixels untouched, layouts agree",
     }
 }
 
+// Whether the detector at significance alpha changed any pixel of a simulated frame.
+static bool changed_by_detector(const sim::scene& scene, double alpha) {
+    firefly_test::frame_views v(sim::simulate(scene));
+    const std::vector<float> before[2] = {v.f.color[0], v.f.color[1]};
+    detector_options o;
+    o.alpha = alpha;
+    detector d(o);
+    REQUIRE(d.process(v.h[0], v.h[1]).error.ok());
+    return v.f.color[0] != before[0] || v.f.color[1] != before[1];
+}
+
 // The frame's promise (fdr.hpp), the generalized ESD's, for the whole detector: a frame with
 // every effect but fireflies (three decades, black background, alpha, fine detail,
 // highlights) is left exactly as it was in at least 1 - alpha of cases. 80 frames at alpha =
@@ -450,14 +461,8 @@ TEST_CASE("pipeline: frames without fireflies are left alone in 1 - alpha of cas
         int frames = 0, touched = 0;
         for (std::uint64_t seed = 1; seed <= 40; ++seed)
             for (const double shape : {1.0, 4.0}) {
-                firefly_test::frame_views v(sim::simulate(sim::null_scene(seed, shape, spp, 64, 64)));
-                const std::vector<float> before[2] = {v.f.color[0], v.f.color[1]};
-                detector_options o;
-                o.alpha = alpha;
-                detector d(o);
-                REQUIRE(d.process(v.h[0], v.h[1]).error.ok());
                 ++frames;
-                touched += v.f.color[0] != before[0] || v.f.color[1] != before[1];
+                touched += changed_by_detector(sim::null_scene(seed, shape, spp, 64, 64), alpha);
             }
         const double bound = alpha + 3 * std::sqrt(alpha * (1 - alpha) / frames);
         INFO(spp << " samples per half: " << touched << " of " << frames << " frames changed");
@@ -475,14 +480,8 @@ TEST_CASE("pipeline: a fog frame with a bright beam and no fireflies is left alo
     const double alpha = 0.05;
     int frames = 0, touched = 0;
     for (std::uint64_t seed = 1; seed <= 12; ++seed) {
-        firefly_test::frame_views v(sim::simulate(sim::named_scene("fog", 320, 240, seed)));
-        const std::vector<float> before[2] = {v.f.color[0], v.f.color[1]};
-        detector_options o;
-        o.alpha = alpha;
-        detector d(o);
-        REQUIRE(d.process(v.h[0], v.h[1]).error.ok());
         ++frames;
-        touched += v.f.color[0] != before[0] || v.f.color[1] != before[1];
+        touched += changed_by_detector(sim::named_scene("fog", 320, 240, seed), alpha);
     }
     const double bound = alpha + 3 * std::sqrt(alpha * (1 - alpha) / frames);
     INFO(touched << " of " << frames << " fog frames changed");

@@ -298,6 +298,18 @@ inline void median_and_mad(float* p, std::size_t n, double& med, double& mad) no
     mad = n % 2 ? cur : 0.5 * (prev + cur);
 }
 
+// f(j) for every pixel index j of the (2 radius + 1)^2 window around (x, y) inside the frame,
+// the centre excluded.
+template <class F>
+inline void for_each_neighbour(int w, int h, int x, int y, int radius, F&& f) {
+    const int x0 = std::max(x - radius, 0), x1 = std::min(x + radius, w - 1);
+    const int y0 = std::max(y - radius, 0), y1 = std::min(y + radius, h - 1);
+    for (int yy = y0; yy <= y1; ++yy)
+        for (int xx = x0; xx <= x1; ++xx)
+            if (xx != x || yy != y)
+                f(static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(xx));
+}
+
 // r~ from the neighbourhood's log r values in both halves (centre excluded): exp(median +
 // s^2 / 2), and the degrees of freedom of that estimate, 4 n / (pi s^2) (a median of n
 // values has variance pi s^2 / (2 n), and log of a variance estimate with d degrees of
@@ -311,15 +323,10 @@ struct pooled_estimate {
 inline pooled_estimate pooled_relative_variance(const std::vector<float> (&rel_var)[2], int w, int h, int x, int y,
                                                 int radius, int min_count, std::vector<float>& pool) {
     pool.clear();
-    const int x0 = std::max(x - radius, 0), x1 = std::min(x + radius, w - 1);
-    const int y0 = std::max(y - radius, 0), y1 = std::min(y + radius, h - 1);
-    for (int yy = y0; yy <= y1; ++yy)
-        for (int xx = x0; xx <= x1; ++xx) {
-            if (xx == x && yy == y) continue;
-            const std::size_t j = static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(xx);
-            for (int half = 0; half < 2; ++half)
-                if (rel_var[half][j] == rel_var[half][j]) pool.push_back(std::log(rel_var[half][j]));
-        }
+    for_each_neighbour(w, h, x, y, radius, [&](std::size_t j) {
+        for (int half = 0; half < 2; ++half)
+            if (rel_var[half][j] == rel_var[half][j]) pool.push_back(std::log(rel_var[half][j]));
+    });
     pooled_estimate e;
     if (pool.size() < static_cast<std::size_t>(std::max(min_count, 1))) return e;
     const double n = static_cast<double>(pool.size());
@@ -343,22 +350,15 @@ inline pooled_estimate pooled_relative_variance(const std::vector<float> (&rel_v
 inline double neighbourhood_lower_level(const std::vector<double> (&level)[2], int w, int h, int x, int y,
                                         int radius, int min_count, std::vector<float>& pool) {
     pool.clear();
-    const int x0 = std::max(x - radius, 0), x1 = std::min(x + radius, w - 1);
-    const int y0 = std::max(y - radius, 0), y1 = std::min(y + radius, h - 1);
-    for (int yy = y0; yy <= y1; ++yy)
-        for (int xx = x0; xx <= x1; ++xx) {
-            if (xx == x && yy == y) continue;
-            const std::size_t j = static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(xx);
-            const double a = level[0][j], b = level[1][j];
-            if (a == a && b == b) pool.push_back(static_cast<float>(std::min(a, b)));
-        }
+    for_each_neighbour(w, h, x, y, radius, [&](std::size_t j) {
+        const double a = level[0][j], b = level[1][j];
+        if (a == a && b == b) pool.push_back(static_cast<float>(std::min(a, b)));
+    });
     if (pool.empty() || pool.size() < static_cast<std::size_t>(std::max(min_count, 1)))
         return std::numeric_limits<double>::quiet_NaN();
-    const std::size_t n = pool.size(), k = n / 2;
-    std::nth_element(pool.begin(), pool.begin() + static_cast<std::ptrdiff_t>(k), pool.end());
-    const double hi = pool[k];
-    if (n % 2) return hi;
-    return 0.5 * (static_cast<double>(*std::max_element(pool.begin(), pool.begin() + static_cast<std::ptrdiff_t>(k))) + hi);
+    double med = 0, mad = 0;
+    median_and_mad(pool.data(), pool.size(), med, mad);
+    return med;
 }
 
 // The statistic for the half whose level is hi against lo (hi > lo > 0), with r~ = r:
