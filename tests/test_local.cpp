@@ -612,3 +612,47 @@ TEST_CASE("local test: options and views are checked", "[local]") {
     flat_frame g(8, 7, 1.0f, 0.01f);
     CHECK(local_test(f.half(0), g.half(1), local_test_options{}, scratch, res).code() == errc::size_mismatch);
 }
+
+// The neighbourhood's level that the one-half excess is judged at (pipeline.hpp, noise_floor):
+// the median over the window of each neighbour's lower half, centre and unusable neighbours
+// left out.
+TEST_CASE("local test: the neighbourhood's lower level", "[local]") {
+    const int w = 3, h = 3;
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    std::vector<double> level[2] = {std::vector<double>(9, 1.0), std::vector<double>(9, 1.0)};
+    std::vector<float> pool;
+    SECTION("a window's neighbours, the frame's edge and the centre left out") {
+        int count[9] = {};
+        for (int y = 0; y < h; ++y)
+            for (int x = 0; x < w; ++x) detail::for_each_neighbour(w, h, x, y, 1, [&](std::size_t j) {
+                    CHECK(j != static_cast<std::size_t>(y * w + x));
+                    ++count[y * w + x];
+                });
+        CHECK(count[0] == 3);  // corner
+        CHECK(count[1] == 5);  // edge
+        CHECK(count[4] == 8);  // centre of the frame
+    }
+    SECTION("fireflies in one half of most neighbours do not lift it") {
+        for (int j = 0; j < 9; ++j) level[j % 2][static_cast<std::size_t>(j)] = 1e30;  // one half of each
+        level[0][4] = level[1][4] = 1e30;                                              // the centre itself
+        CHECK(detail::neighbourhood_lower_level(level, w, h, 1, 1, 1, 1, pool) == 1.0);
+    }
+    SECTION("the median of the lower halves, 1e-3 next to 1e30 finite") {
+        const double lower[9] = {1e-3, 2e-3, 3e-3, 4e-3, 0.0, 5e-3, 6e-3, 7e-3, 8e-3};
+        for (std::size_t j = 0; j < 9; ++j) {
+            level[0][j] = lower[j];
+            level[1][j] = 1e30;
+        }
+        const double got = detail::neighbourhood_lower_level(level, w, h, 1, 1, 1, 1, pool);
+        CHECK(got == Approx(0.5 * (4e-3 + 5e-3)).epsilon(1e-6));  // 8 values: the two middle ones
+    }
+    SECTION("neighbours with an unusable half are left out; too few give NaN") {
+        for (std::size_t j = 0; j < 9; ++j)
+            if (j != 0 && j != 8) level[1][j] = nan;
+        level[0][0] = 2.0;
+        level[0][8] = 4.0;
+        CHECK(detail::neighbourhood_lower_level(level, w, h, 1, 1, 1, 2, pool) == 1.0);  // min(2, 1), min(4, 1)
+        CHECK(std::isnan(detail::neighbourhood_lower_level(level, w, h, 1, 1, 1, 3, pool)));
+        CHECK(std::isnan(detail::neighbourhood_lower_level(level, 1, 1, 0, 0, 1, 1, pool)));  // 1x1: none
+    }
+}
