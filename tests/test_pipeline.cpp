@@ -449,8 +449,9 @@ static bool changed_by_detector(const sim::scene& scene, double alpha) {
 // The frame's promise (fdr.hpp), the generalized ESD's, for the whole detector: a frame with
 // every effect but fireflies (three decades, black background, alpha, fine detail,
 // highlights) is left exactly as it was in at least 1 - alpha of cases. 80 frames at alpha =
-// 0.1, 256 samples per half: at most 0.1 plus three binomial standard deviations (9 of 80;
-// 29 with the fixed per-test levels before: the local test at q = 1e-4, the excess at z > 4).
+// 0.1, 256 samples per half: at most 0.1 plus three binomial standard deviations (8 of 80;
+// 9 with the noise at the lower half's level, 29 with the fixed per-test levels: the local
+// test at q = 1e-4, the excess at z > 4).
 // Not kept below that on these 64x64 frames: at 64 and 16 samples of a per-sample shape 1
 // (relative sd 1), 21 and 58 of 80 (26 and 65 with the noise judged at the lower half's
 // level, 44 and 74 with fixed levels), where the normal excess understates the tail at fine

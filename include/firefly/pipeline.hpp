@@ -736,14 +736,18 @@ private:
     // predicts at the pixel's level: one pixel's variance from few heavy-tailed samples is
     // often far too low, and a noisy pixel would then "exceed" its other half. The median, not
     // the mean-corrected estimate: fireflies around the pixel inflate the spread that corrects
-    // it. The level is the neighbourhood's median level (both halves), held between the
-    // other half's level and the outlier's: without a firefly both halves are noisy draws
-    // around the same value, and a pair far apart by chance has its low half below that value
-    // (at the low half's level, noise that scales with the level is underestimated: a bright,
-    // noisy beam without a single firefly had 12 pixels "exceed" their other half at z > 5);
-    // a firefly on a smooth region leaves the median at the other half's level (power kept);
-    // at an edge or on detail the clamp keeps the level within the pixel's own two values.
-    // Renderer units, like v.
+    // it. The level is the neighbourhood's, held between the other half's level and the
+    // outlier's: without a firefly both halves are noisy draws around the same value, and a
+    // pair far apart by chance has its low half below that value (at the low half's level,
+    // noise that scales with the level is underestimated: a bright, noisy beam without a
+    // single firefly had 12 pixels "exceed" their other half at z > 5); a firefly on a smooth
+    // region leaves the neighbourhood at the other half's level (power kept); at an edge or on
+    // detail the clamp keeps the level within the pixel's own two values. The neighbourhood's
+    // level is the median of each neighbour's lower half (one value a neighbour, so half the
+    // local test's count of values; fireflies in one half of many neighbours do not lift it),
+    // times exp(0.545 sqrt(t) + t / 2) for the lower half's bias on a clean pixel: the median of
+    // the smaller of two normal draws sits 0.545 sd below their mean (Phi(-0.545) = 1 -
+    // 1 / sqrt 2), in log terms for relative variance t. Renderer units, like v.
     double noise_floor(int x, int y, int w, int h, double v, double l_other, double l_out, double calibration,
                        std::vector<float>& pool) const {
         const local_test_scratch& ls = local_scratch_;
@@ -751,13 +755,12 @@ private:
         const detail::pooled_estimate e = detail::pooled_relative_variance(
             ls.rel_var, w, h, x, y, options_.local.radius, options_.local.min_neighbours, pool);
         if (!(e.nu == e.nu)) return v;  // too few neighbours: the pixel's own variance
-        double level = l_other;
         const double t = e.typical;
         const double around = detail::neighbourhood_lower_level(ls.level, w, h, x, y, options_.local.radius,
                                                                 (options_.local.min_neighbours + 1) / 2, pool) *
                               std::exp(std::min(0.5449521356 * std::sqrt(t) + 0.5 * t, 700.0));
-        if (around > l_other) level = std::min(around, std::max(l_out, l_other));
-        return std::max(v, e.typical * level * level / calibration);
+        const double level = around > l_other ? std::min(around, std::max(l_out, l_other)) : l_other;
+        return std::max(v, t * level * level / calibration);
     }
 
     // The local test's flags join the outliers (after the global ones in each half's list).
