@@ -354,8 +354,7 @@ inline double neighbourhood_lower_level(const std::vector<double> (&level)[2], i
         const double a = level[0][j], b = level[1][j];
         if (a == a && b == b) pool.push_back(static_cast<float>(std::min(a, b)));
     });
-    if (pool.empty() || pool.size() < static_cast<std::size_t>(std::max(min_count, 1)))
-        return std::numeric_limits<double>::quiet_NaN();
+    if (pool.size() < static_cast<std::size_t>(std::max(min_count, 1))) return std::numeric_limits<double>::quiet_NaN();
     double med = 0, mad = 0;
     median_and_mad(pool.data(), pool.size(), med, mad);
     return med;
