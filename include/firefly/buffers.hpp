@@ -21,6 +21,10 @@
 //   levels are the lower half's mean y, which fireflies do not move; see pooled_noise),
 //   scaled from a median to a mean of chi-square(K - 1) / (K - 1) values (without
 //   use_variance). Never below the spread of the buffers the candidate is tested against.
+//   Where most pixels carry a firefly (dense ones), a neighbour's own spread is a firefly's
+//   and so is the median: the pixels flagged at the cap level give the spread of their
+//   buffers below the flagged ones instead (a firefly's other buffers are an unbiased sample
+//   of the pixel's law), and the pixels next to them are judged again (refine_noise).
 //   Step-down (Rosner's order): sorted y_(1) >= ... >= y_(K); for i from floor(K / 2) down
 //   to 1, the i-th highest against R, the buffers below it (never itself, nor the ones above):
 //       T_i = (y_(i) - mean_R y) / (mean_R y sqrt(v (1 + 1 / |R|)))
@@ -129,6 +133,7 @@ struct cross_buffer_options {
                                  // spread of the buffer means (K = 3 always uses them); the
                                  // spread measured better at 8-16 samples per buffer
     bool reconstruct = true;     // false: detect and report only
+    bool refine_noise = true;    // neighbours flagged at the cap pool their noise without their flagged buffers
     int radius = 1;              // the noise is pooled over (2 radius + 1)^2 pixels (0 to 8)
     bool return_energy = true;   // K >= 3, 3 or 4 channels: the removed fireflies' energy is
                                  // returned where many agree on it (energy.hpp)
@@ -253,28 +258,28 @@ inline double median_of(double* v, int n) noexcept {
 // The pixel's own noise: the relative variance of one buffer's y, var(y) / mean(y)^2; from
 // the spread of its usable buffers, or (with variance) the median of Var[x] / x^2 / 9 (the
 // delta method on cbrt). NaN when unknown (fewer than 2 buffers, or a black pixel).
-inline double pixel_noise(const pixel_buffers& p, bool with_variance) noexcept {
+inline double pixel_noise(const pixel_buffers& p, bool with_variance, int from = 0) noexcept {
     const double nan = std::numeric_limits<double>::quiet_NaN();
     if (with_variance) {
         std::array<double, max_buffers> r{};
         int m = 0;
-        for (int j = 0; j < p.usable; ++j) {
+        for (int j = from; j < p.usable; ++j) {
             const double v = p.rel_var[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])];
             if (std::isfinite(v)) r[static_cast<std::size_t>(m++)] = v;
         }
         // Never below the spread: few-sample variances of skewed samples mostly sit low.
         const double given = m == 0 ? nan : median_of(r.data(), m) / 9.0;
-        const double spread = pixel_noise(p, false);
+        const double spread = pixel_noise(p, false, from);
         return std::isnan(given) ? spread : std::isnan(spread) ? given : std::max(given, spread);
     }
-    if (p.usable < 2) return nan;
-    const double mean = rest_mean(p, 0);
+    if (p.usable - from < 2) return nan;
+    const double mean = rest_mean(p, from);
     double ss = 0;
-    for (int j = 0; j < p.usable; ++j) {
+    for (int j = from; j < p.usable; ++j) {
         const double d = p.ranked_y(j) - mean;
         ss += d * d;
     }
-    return mean != 0 ? ss / (p.usable - 1) / (mean * mean) : nan;
+    return mean != 0 ? ss / (p.usable - from - 1) / (mean * mean) : nan;
 }
 
 // The relative variance of y among order[i..usable) (R, mean given): their spread, or with
@@ -370,7 +375,7 @@ public:
     // Work memory kept between frames, bytes (the K = 2 detector's included).
     std::size_t scratch_bytes() const noexcept {
         return (noise_.capacity() + log_p_.capacity() + excess_.capacity() + row_returned_.capacity()) *
-                   sizeof(double) + level_.capacity() * sizeof(float) +
+                   sizeof(double) + level_.capacity() * sizeof(float) + refined_.capacity() +
                energy_.bytes() + pair_.scratch_bytes();
     }
 
@@ -475,6 +480,13 @@ private:
         exec_.run(static_cast<std::size_t>(h), [&](std::size_t y) {
             find_row(b, k, masks, has_var, with_var, static_cast<int>(y), counts[y]);
         });
+        if (refine_noise(b, k, has_var, with_var, counts)) {
+            std::vector<row_counts> again(static_cast<std::size_t>(h), row_counts(k));
+            exec_.run(static_cast<std::size_t>(h), [&](std::size_t y) {
+                find_row(b, k, masks, has_var, with_var, static_cast<int>(y), again[y], &counts[y]);
+            });
+            counts.swap(again);
+        }
         rep.tested = 0;
         for (const row_counts& c : counts) rep.tested += c.tested;
         set_frame_level(counts, rep.tested, k, pool);
@@ -525,6 +537,7 @@ private:
         int x = 0;
         double log_p = 0;
         int pool = 0;  // the pixels its pooled noise came from
+        int flagged = 0;  // buffers flagged at the cap level
     };
     struct row_counts {
         explicit row_counts(int k) : per_buffer(static_cast<std::size_t>(k), 0) {}
@@ -601,6 +614,33 @@ private:
         }
     }
 
+    // A neighbour's own noise is a firefly's spread where it carries one. Pixels flagged at
+    // the cap level get the spread of their buffers below the flagged ones (for a firefly,
+    // the others are an unbiased sample of the pixel's law; a clean pixel flagged by chance,
+    // at most q of them, only lowers its neighbours' medians by one rank). True when any
+    // noise changed (the find pass is run again).
+    template <class C, class V>
+    bool refine_noise(const buffer_view<C, V>* b, int k, bool has_var, bool with_var,
+                      const std::vector<row_counts>& counts) {
+        if (!options_.refine_noise) return false;
+        const int w = b[0].color.width();
+        refined_.assign(noise_.size(), 0);
+        std::vector<std::uint8_t> changed(counts.size(), 0);
+        exec_.run(counts.size(), [&](std::size_t y) {
+            detail::pixel_buffers p;
+            p.k = k;
+            for (const candidate& f : counts[y].found) {
+                if (f.flagged == 0) continue;
+                gather(b, k, f.x, static_cast<int>(y), has_var, p);
+                const std::size_t i = index(f.x, static_cast<int>(y), w);
+                noise_[i] = detail::pixel_noise(p, with_var, f.flagged);
+                refined_[i] = 1;
+                changed[y] = 1;
+            }
+        });
+        return std::find(changed.begin(), changed.end(), 1) != changed.end();
+    }
+
     // A median of relative variances scaled to a mean of chi-square(K - 1) / (K - 1)
     // estimates (Wilson-Hilferty median; with variance they have many degrees of freedom:
     // no scale).
@@ -664,28 +704,51 @@ private:
     // here for the pixels pass 3 does not visit.
     template <class C, class V>
     void find_row(const buffer_view<C, V>* b, int k, const image_view<std::uint8_t>* masks, bool has_var,
-                  bool with_var, int y, row_counts& rc) {
+                  bool with_var, int y, row_counts& rc, const row_counts* before = nullptr) {
         detail::pixel_buffers p;
         p.k = k;
-        const int w = b[0].color.width();
+        const int w = b[0].color.width(), h = b[0].color.height();
         rc.found.clear();
+        std::size_t next = 0;  // before's next candidate
+        if (before) {  // which pixels are tested or left does not depend on the noise
+            rc.tested = before->tested;
+            rc.left = before->left;
+        }
         for (int x = 0; x < w; ++x) {
+            if (before) {
+                while (next < before->found.size() && before->found[next].x < x) ++next;
+                const bool was = next < before->found.size() && before->found[next].x == x;
+                if (!near_refined(x, y, w, h)) {  // the same noise around: pass 1's verdict stands
+                    if (was) rc.found.push_back(before->found[next]);
+                    continue;
+                }
+            }
             gather(b, k, x, y, has_var, p);
             const int bad = k - p.usable;
             if (bad > k / 2) {
-                ++rc.left;
+                rc.left += before ? 0 : 1;
                 write_masks(masks, p, x, y);
                 continue;
             }
-            const pooled pn = pooled_noise(x, y, w, b[0].color.height(), k, with_var, own_rest(p, with_var));
-            if (p.usable >= 3) ++rc.tested;
-            if (pn.n > 0 && detail::judge_pixel(p, pn.noise, with_var, thresholds_.at(pn.n)) > 0)
-                rc.found.push_back({x, detail::pixel_log_p(p, pn.noise, with_var, detail::pooled_df(pn.n, k)), pn.n});
+            const pooled pn = pooled_noise(x, y, w, h, k, with_var, own_rest(p, with_var));
+            if (p.usable >= 3 && !before) ++rc.tested;
+            const int flagged = pn.n > 0 ? detail::judge_pixel(p, pn.noise, with_var, thresholds_.at(pn.n)) : 0;
+            if (flagged > 0)
+                rc.found.push_back({x, detail::pixel_log_p(p, pn.noise, with_var, detail::pooled_df(pn.n, k)), pn.n, flagged});
             else if (bad > 0)
                 rc.found.push_back({x, 0.0, 0});
             else
                 write_masks(masks, p, x, y);
         }
+    }
+
+    // Whether a pixel of (x, y)'s window had its noise refined.
+    bool near_refined(int x, int y, int w, int h) const noexcept {
+        const int r = options_.radius;
+        for (int j = std::max(0, y - r); j <= std::min(h - 1, y + r); ++j)
+            for (int i = std::max(0, x - r); i <= std::min(w - 1, x + r); ++i)
+                if (refined_[index(i, j, w)]) return true;
+        return false;
     }
 
     // The frame's level (fdr.hpp): Benjamini-Hochberg at alpha over the tested pixels, never
@@ -838,6 +901,7 @@ private:
     std::vector<double> log_p_;              // the candidates' p-values (log), for the level
     std::vector<double> noise_;  // per pixel: its own relative variance of y (NaN: unknown)
     std::vector<float> level_;   // per pixel: lower_level, its buffers' lower half (NaN: none usable)
+    std::vector<std::uint8_t> refined_;  // per pixel: its noise pooled without the buffers flagged at the cap
     std::vector<double> excess_;        // energy return: what was removed, 3 channels per pixel
     std::vector<double> row_returned_;  // energy return: what was given back, per row
 
