@@ -296,6 +296,10 @@ inline void add_cross_options(CLI::App& app, options& c) {
         ->type_name("N")
         ->check(whole_in(0, 8, "a whole number from 0 to 8"))
         ->group(cross_group);
+    app.add_flag_callback("--no-refine-noise", [&c] { c.x.refine_noise = false; },
+                          "pool the neighbours' noise with their flagged buffers (no second look next to "
+                          "fireflies found at the cap: faster where fireflies are dense, misses more there)")
+        ->group(cross_group);
     app.add_flag("--use-variance", c.x.use_variance,
                  "--buffers with 4 or more files: the noise from the files' variances instead of the spread of "
                  "the buffers (3 files always use them)")

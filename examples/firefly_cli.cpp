@@ -611,6 +611,7 @@ json options_json(const options& c) {
         j["false_alarm"] = c.x.false_alarm;
         j["radius"] = c.x.radius;
         j["use_variance"] = c.x.use_variance;
+        j["refine_noise"] = c.x.refine_noise;
         j["return_energy"] = c.x.return_energy;
         j["energy_sigma"] = c.x.energy_sigma;
         j["energy_coarse_sigma"] = c.x.energy_coarse_sigma;
