@@ -52,11 +52,11 @@
 // rebuilt, the spread alone 0.19% (its caustic fireflies included).
 // Measured, relMSE against the reference (../shared/data/cycles-caustics-seeds, 8 Cycles
 // renders of 16 samples, no variance; 128 samples in all): mean 0.496; K = 4 (2 renders per
-// buffer): median of means 0.0326, G-MoN (best threshold) 0.0321, this 0.0215 (0.0249 without
+// buffer): median of means 0.0326, G-MoN (best threshold) 0.0321, this 0.0197 (0.0249 without
 // the energy return, before the noise was pooled by level); K = 8: median of means 0.0242,
-// G-MoN 0.0230, this 0.0179 (0.0234). The simulator, 1024x540 (docs/accuracy.md), this /
+// G-MoN 0.0230, this 0.0182 (0.0234). The simulator, 1024x540 (docs/accuracy.md), this /
 // G-MoN at its best: caustics K = 4 0.032 / 0.133, K = 8 0.032 / 0.086; interior K = 4
-// 0.039 / 0.061, K = 8 0.019 / 0.042; a frame
+// 0.037 / 0.061, K = 8 0.019 / 0.042; a frame
 // without fireflies: unchanged, the mean's 0.00093582 at K = 4. How the result grows with K
 // and what each K costs: docs/k_study.md.
 // Highlights: a firefly on a highlight is rebuilt, rightly (the energy return then adds to
@@ -64,7 +64,7 @@
 // simulated caustics, highlights and production scenes at K = 4 and 8 (0.977-0.99 before the
 // noise was pooled by level; tests: small noisy highlights kept).
 // Not promised: heavy-tailed (lognormal) per-sample laws, as local_test.hpp: the interior
-// scene changes 0.1-0.26% of its clean pixel-buffers at q = 1e-4 (its bright patch: 0.977 not
+// scene changes 0.1-0.26% of its clean pixel-buffers at q = 1e-4 (its bright patch: 0.973 not
 // lowered at K = 8); pixels whose buffers straddle 0 (the cube root is steep there: 2-3% of
 // such pixel-buffers flagged in the tests).
 //
