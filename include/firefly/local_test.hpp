@@ -526,17 +526,17 @@ inline double local_score(const local_test_options& o, const local_levels_q& k, 
     return score;
 }
 
-// The pair test's p-value (log) for half hi at (x, y), with r~ as local_score takes it, over
-// the levels of a finished local_test: for a one-half outlier the global test found. NaN
-// where the pixel is not tested (a half does not count, too few neighbours, hi not higher).
-inline double pair_log_p(const local_test_options& o, const local_test_scratch& s, int w, int h, int x, int y,
-                         int hi, std::vector<float>& pool) {
+// The pair test's p-value (log) for half hi at (x, y), with r~ as local_score takes it from
+// `pooled` (pooled_relative_variance at the pixel: one estimate serves both halves), over the
+// levels of a finished local_test: for a one-half outlier the global test found. NaN where the
+// pixel is not tested (a half does not count, too few neighbours, hi not higher).
+inline double pair_log_p(const local_test_scratch& s, int w, int x, int y, int hi,
+                         const pooled_estimate& pooled) noexcept {
     const double nan = std::numeric_limits<double>::quiet_NaN();
     const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
     if (s.rel_var[0].size() <= i || s.rel_var[1].size() <= i) return nan;
     const double r_other = s.rel_var[1 - hi][i], l_hi = s.level[hi][i], l_lo = s.level[1 - hi][i];
     if (!(r_other == r_other) || !(s.rel_var[hi][i] == s.rel_var[hi][i]) || !(l_hi > l_lo)) return nan;
-    const pooled_estimate pooled = pooled_relative_variance(s.rel_var, w, h, x, y, o.radius, o.min_neighbours, pool);
     if (!(pooled.nu == pooled.nu)) return nan;
     const double r = std::max(pooled.r, r_other);
     const double df = std::min(std::max(1.0 / (0.5 * r + 1.0 / pooled.nu), 1.0), 1e10);

@@ -276,6 +276,11 @@ private:
         reconstruct_scratch recon;
     };
 
+    struct neighbourhood {             // neighbourhood_at
+        detail::pooled_estimate pooled;  // the local test's r~ at the pixel
+        double around = 0;               // the neighbourhood's level (noise_floor)
+    };
+
     static constexpr int band_rows = 64;  // row bands of the full-frame passes: tasks for any pool
 
     static frame_report& fail(frame_report& r, status st) {
@@ -557,15 +562,15 @@ private:
     // heavier-tailed than any gamma, it kept 100x fireflies: relMSE 0.132 -> 0.197).
     template <class C, class V, class A>
     double excess_log_p(const half_buffer<C, V, A>* hb[2], int h, int x, int y, double cal,
-                        std::vector<float>& pool) const {
-        const int w = hb[0]->color.width(), hgt = hb[0]->color.height();
+                        const neighbourhood& nb) const {
         const double l_out = mean_colour(hb[h]->color, x, y), l_other = mean_colour(hb[1 - h]->color, x, y);
         const double v = reduced_variance(hb[1 - h]->variance, x, y);
-        const double v_other = noise_floor(x, y, w, hgt, v, l_other, l_out, cal, pool);
+        const double v_other = noise_floor(v, l_other, l_out, cal, nb);
         if (!exceeds_other_half(options_.highlight, l_out, l_other, v_other, cal)) return std::numeric_limits<double>::quiet_NaN();
         double log_p = normal_log_upper_tail(excess_z(l_out, l_other, v_other, cal));
         if (options_.local_test) {
-            const double pair = detail::pair_log_p(options_.local, local_scratch_, w, hgt, x, y, h, pool);
+            const int w = hb[0]->color.width();
+            const double pair = detail::pair_log_p(local_scratch_, w, x, y, h, nb.pooled);
             if (pair == pair) log_p = std::min(log_p, pair) + std::log(2.0);
         }
         return log_p;
@@ -584,7 +589,8 @@ private:
             for (std::size_t j = j0; j < j1; ++j) {
                 const int x = static_cast<int>(pairs_[j] % static_cast<std::uint32_t>(w));
                 const int y = static_cast<int>(pairs_[j] / static_cast<std::uint32_t>(w));
-                for (int h = 0; h < 2; ++h) pair_log_p_[j * 2 + static_cast<std::size_t>(h)] = excess_log_p(hb, h, x, y, cal, pool);
+                const neighbourhood nb = neighbourhood_at(x, y, w, a.color.height(), pool);  // both halves'
+                for (int h = 0; h < 2; ++h) pair_log_p_[j * 2 + static_cast<std::size_t>(h)] = excess_log_p(hb, h, x, y, cal, nb);
             }
         });
     }
@@ -669,7 +675,7 @@ private:
                 return judges_confidence && is_highlight(options_.highlight, l, l, v, v, cal) ? highlight_bit : 0;
             }
             if (!(options_.highlight.min_excess_z > 0)) return 0;  // the paper: one half is a firefly
-            log_p = excess_log_p(hb, h, x, y, cal, pool);
+            log_p = excess_log_p(hb, h, x, y, cal, neighbourhood_at(x, y, w, hb[h]->color.height(), pool));
             return log_p == log_p ? 0 : consistent_bit;
         };
         for (int h = 0; h < 2; ++h) {
@@ -748,19 +754,30 @@ private:
     // times exp(0.545 sqrt(t) + t / 2) for the lower half's bias on a clean pixel: the median of
     // the smaller of two normal draws sits 0.545 sd below their mean (Phi(-0.545) = 1 -
     // 1 / sqrt 2), in log terms for relative variance t. Renderer units, like v.
-    double noise_floor(int x, int y, int w, int h, double v, double l_other, double l_out, double calibration,
-                       std::vector<float>& pool) const {
-        const local_test_scratch& ls = local_scratch_;
-        if (!options_.local_test || ls.rel_var[0].empty() || !(calibration > 0)) return v;
-        const detail::pooled_estimate e = detail::pooled_relative_variance(
-            ls.rel_var, w, h, x, y, options_.local.radius, options_.local.min_neighbours, pool);
-        if (!(e.nu == e.nu)) return v;  // too few neighbours: the pixel's own variance
-        const double t = e.typical;
-        const double around = detail::neighbourhood_lower_level(ls.level, w, h, x, y, options_.local.radius,
-                                                                (options_.local.min_neighbours + 1) / 2, pool) *
-                              std::exp(std::min(0.5449521356 * std::sqrt(t) + 0.5 * t, 700.0));
-        const double level = around > l_other ? std::min(around, std::max(l_out, l_other)) : l_other;
+    double noise_floor(double v, double l_other, double l_out, double calibration, const neighbourhood& nb) const {
+        // too few neighbours: the pixel's own variance
+        if (!(calibration > 0) || !(nb.pooled.nu == nb.pooled.nu)) return v;
+        const double t = nb.pooled.typical;
+        const double level = nb.around > l_other ? std::min(nb.around, std::max(l_out, l_other)) : l_other;
         return std::max(v, t * level * level / calibration);
+    }
+
+    // What the local test's levels say about the neighbourhood of (x, y), computed once for
+    // both halves' excess_log_p: the pooled relative variance (nu NaN: none, or no local test)
+    // and the neighbourhood's level with its bias undone (noise_floor).
+    neighbourhood neighbourhood_at(int x, int y, int w, int h, std::vector<float>& pool) const {
+        const local_test_scratch& ls = local_scratch_;
+        const std::size_t i = index(x, y, w);
+        neighbourhood nb;
+        if (!options_.local_test || ls.rel_var[0].size() <= i || ls.rel_var[1].size() <= i) return nb;
+        nb.pooled = detail::pooled_relative_variance(ls.rel_var, w, h, x, y, options_.local.radius,
+                                                     options_.local.min_neighbours, pool);
+        if (!(nb.pooled.nu == nb.pooled.nu)) return nb;
+        const double t = nb.pooled.typical;
+        nb.around = detail::neighbourhood_lower_level(ls.level, w, h, x, y, options_.local.radius,
+                                                      (options_.local.min_neighbours + 1) / 2, pool) *
+                    std::exp(std::min(0.5449521356 * std::sqrt(t) + 0.5 * t, 700.0));
+        return nb;
     }
 
     // The local test's flags join the outliers (after the global ones in each half's list).
