@@ -148,12 +148,13 @@ struct local_test_result {
 struct local_band_scratch {
     std::vector<float> pool;
     std::vector<double> levels;      // the neighbourhood's levels (spatial test)
+    std::vector<std::ptrdiff_t> window;  // detail::window_offsets
     std::vector<double> thresholds;  // t_df(q) by df grid step (see detail::t_threshold)
     double thresholds_q = 0;
     local_test_result found;         // this band's flags and counts
     std::size_t bytes() const noexcept {
         return (levels.capacity() + thresholds.capacity()) * sizeof(double) + pool.capacity() * sizeof(float) +
-               (found.half[0].index.capacity() + found.half[1].index.capacity()) * 16;
+               window.capacity() * sizeof(std::ptrdiff_t) + (found.half[0].index.capacity() + found.half[1].index.capacity()) * 16;
     }
 };
 
@@ -416,22 +417,39 @@ inline double f_upper_tail(double f, double d1, double d2) noexcept {
 }
 
 // Sum and count of the usable neighbours' levels in both halves (centre excluded), in scan
-// order: for the screen only, whose margin dwarfs any rounding.
+// order: for the screen only, whose margin dwarfs any rounding. Every pixel's screen runs it,
+// so it adds without branches (a usable level is > 0 (local_pixel) and the sum starts at +0:
+// adding +0 for an unusable one gives the same bits as skipping it), and away from the
+// frame's edges walks the window by `window` (window_offsets), without bounds.
 inline double neighbour_sum(const local_test_scratch& s, int w, int h, int x, int y, int radius,
-                            std::size_t& count) noexcept {
+                            const std::vector<std::ptrdiff_t>& window, std::size_t& count) noexcept {
+    const float* r0 = s.rel_var[0].data();
+    const float* r1 = s.rel_var[1].data();
+    const double* l0 = s.level[0].data();
+    const double* l1 = s.level[1].data();
     double sum = 0;
-    count = 0;
-    for (int yy = std::max(y - radius, 0); yy <= std::min(y + radius, h - 1); ++yy)
-        for (int xx = std::max(x - radius, 0); xx <= std::min(x + radius, w - 1); ++xx) {
-            if (xx == x && yy == y) continue;
-            const std::size_t j = static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(xx);
-            for (int half = 0; half < 2; ++half)
-                if (s.rel_var[half][j] == s.rel_var[half][j]) {
-                    sum += s.level[half][j];
-                    ++count;
-                }
-        }
+    std::size_t n = 0;
+    auto add = [&](std::size_t j) {
+        const bool u0 = r0[j] == r0[j], u1 = r1[j] == r1[j];
+        sum += u0 ? l0[j] : 0.0;
+        sum += u1 ? l1[j] : 0.0;
+        n += static_cast<std::size_t>(u0) + static_cast<std::size_t>(u1);
+    };
+    const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+    if (x >= radius && y >= radius && x + radius < w && y + radius < h)
+        for (const std::ptrdiff_t d : window) add(static_cast<std::size_t>(static_cast<std::ptrdiff_t>(i) + d));
+    else
+        for_each_neighbour(w, h, x, y, radius, add);
+    count = n;
     return sum;
+}
+
+// The offsets of the window's neighbours from its centre (row stride w), in scan order.
+inline void window_offsets(int w, int radius, std::vector<std::ptrdiff_t>& out) {
+    out.clear();
+    for (int dy = -radius; dy <= radius; ++dy)
+        for (int dx = -radius; dx <= radius; ++dx)
+            if (dx != 0 || dy != 0) out.push_back(static_cast<std::ptrdiff_t>(dy) * w + dx);
 }
 
 // The same levels into out, sorted, and their mean summed in that order: the same bits under
@@ -498,7 +516,7 @@ inline double local_score(const local_test_options& o, const local_levels_q& k, 
     bool spatial_may = false;
     if (o.spatial) {
         std::size_t count = 0;
-        const double sum = neighbour_sum(s, w, h, x, y, o.radius, count);
+        const double sum = neighbour_sum(s, w, h, x, y, o.radius, band.window, count);
         const double m_max = 1.0 / r_other, n = static_cast<double>(count);
         spatial_may = count >= static_cast<std::size_t>(o.min_neighbours) && sum > 0 && l_hi * n > sum &&
                       paulson_z(l_hi * n / sum, 2.0 * m_max, 2.0 * n * m_max) > zq - 1.0;
@@ -553,6 +571,7 @@ inline void local_rows(const local_test_options& o, const local_levels_q& k, con
         f.log_p.clear();
     }
     found.tested = found.screened = found.spatial = 0;
+    window_offsets(w, o.radius, band.window);
     for (int y = y0; y < y1; ++y)
         for (int x = 0; x < w; ++x) {
             const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
