@@ -210,6 +210,7 @@ public:
     std::size_t scratch_bytes() const noexcept {
         std::size_t n = cache_->bytes() + local_scratch_.bytes() + local_result_.bytes() + calibration_.bytes() +
                         pairs_.capacity() * sizeof(std::uint32_t) + pair_log_p_.capacity() * sizeof(double) +
+                        visit_.capacity() * sizeof(std::uint64_t) +
                         frame_log_p_.capacity() * sizeof(double);
         for (const auto& h : halves_)
             n += h.sd.capacity() * sizeof(float) + h.label.capacity() +
@@ -584,14 +585,11 @@ private:
         const int w = a.color.width();
         pair_log_p_.assign(pairs_.size() * 2, std::numeric_limits<double>::quiet_NaN());
         if (!(options_.highlight.min_excess_z > 0)) return;
-        for_chunks(pairs_.size(), [&](std::size_t j0, std::size_t j1) {
-            std::vector<float> pool;
-            for (std::size_t j = j0; j < j1; ++j) {
-                const int x = static_cast<int>(pairs_[j] % static_cast<std::uint32_t>(w));
-                const int y = static_cast<int>(pairs_[j] / static_cast<std::uint32_t>(w));
-                const neighbourhood nb = neighbourhood_at(x, y, w, a.color.height(), pool);  // both halves'
-                for (int h = 0; h < 2; ++h) pair_log_p_[j * 2 + static_cast<std::size_t>(h)] = excess_log_p(hb, h, x, y, cal, nb);
-            }
+        for_entries_by_row(pairs_.data(), pairs_.size(), [&](std::size_t j, std::vector<float>& pool) {
+            const int x = static_cast<int>(pairs_[j] % static_cast<std::uint32_t>(w));
+            const int y = static_cast<int>(pairs_[j] / static_cast<std::uint32_t>(w));
+            const neighbourhood nb = neighbourhood_at(x, y, w, a.color.height(), pool);  // both halves'
+            for (int h = 0; h < 2; ++h) pair_log_p_[j * 2 + static_cast<std::size_t>(h)] = excess_log_p(hb, h, x, y, cal, nb);
         });
     }
 
@@ -682,12 +680,9 @@ private:
             const std::size_t n = rep.half[h].outliers - rep.half[h].local;  // local flags exceed
             std::vector<std::uint8_t>& bits = halves_[h].decision;         // the other half already
             bits.assign(n, 0);
-            for_chunks(n, [&](std::size_t j0, std::size_t j1) {
-                std::vector<float> pool;
-                for (std::size_t j = j0; j < j1; ++j) {
-                    halves_[h].log_p[j] = std::numeric_limits<double>::quiet_NaN();
-                    bits[j] = decide(h, halves_[h].order[j], pool, halves_[h].log_p[j]);
-                }
+            for_entries_by_row(halves_[h].order.data(), n, [&](std::size_t j, std::vector<float>& pool) {
+                halves_[h].log_p[j] = std::numeric_limits<double>::quiet_NaN();
+                bits[j] = decide(h, halves_[h].order[j], pool, halves_[h].log_p[j]);
             });
         }
         for (int h = 0; h < 2; ++h)
@@ -735,6 +730,21 @@ private:
     void for_chunks(std::size_t n, F&& f) const {
         constexpr std::size_t chunk = 4096;
         exec_.run((n + chunk - 1) / chunk, [&](std::size_t c) { f(c * chunk, std::min(n, (c + 1) * chunk)); });
+    }
+
+    // f(j, pool) for the n entries of a list of pixels (list[j], distinct), in chunks as
+    // for_chunks, taken in row-major order of the pixels: f reads each pixel's neighbourhood,
+    // and the lists come in ESD order, scattered over the frame (by row, neighbours share cache
+    // lines). f(j) writes only entry j's results, so the order changes nothing.
+    template <class F>
+    void for_entries_by_row(const std::uint32_t* list, std::size_t n, F&& f) {
+        visit_.resize(n);
+        for (std::size_t j = 0; j < n; ++j) visit_[j] = (static_cast<std::uint64_t>(list[j]) << 32) | j;
+        std::sort(visit_.begin(), visit_.end());
+        for_chunks(n, [&](std::size_t k0, std::size_t k1) {
+            std::vector<float> pool;
+            for (std::size_t k = k0; k < k1; ++k) f(static_cast<std::size_t>(visit_[k] & 0xffffffffu), pool);
+        });
     }
 
     // The other half's variance at (x, y), but never below what its neighbourhood's typical
@@ -991,6 +1001,7 @@ private:
     local_test_result local_result_;
     std::vector<double> frame_log_p_;  // the one-half fireflies' p-values (log), for the frame's level
     std::vector<double> pair_log_p_;   // per pair and half: the p-value (log) of its excess; NaN: none
+    std::vector<std::uint64_t> visit_;  // for_entries_by_row
     double frame_level_ = 0;           // log of the largest p-value the frame's decision keeps
 };
 
