@@ -369,6 +369,15 @@ inline double pair_statistic(double hi, double lo, double r) noexcept {
     return std::sqrt(0.5 / r) * s;
 }
 
+// Whether pair_statistic(hi, lo, r) may exceed z > 0: false only where it surely does not,
+// from t^2 = (hi - lo)^2 / (hi lo) / (2 r) without the square roots and divisions of the
+// exact form (every pixel's screen asks; the margin 1e-6 is far above either form's rounding,
+// at most ~1e-9 with r >= 1e-14).
+inline bool pair_may_exceed(double hi, double lo, double r, double z) noexcept {
+    const double d = hi - lo, zm = z - 1e-6;
+    return !(d * d / (hi * lo) * (0.5 / r) < zm * zm);
+}
+
 // t_df(q) with df rounded down to a grid of 64 steps per octave (from 1 to 2^34): a lower df
 // gives a higher threshold, so the rounding only makes the test a little stricter (df at most
 // 1.1% low), and the Newton iterations run once per grid step and sequence of frames.
@@ -404,6 +413,17 @@ struct local_levels_q {
 inline double paulson_z(double f, double d1, double d2) noexcept {
     const double c = std::cbrt(f), a1 = 2.0 / (9.0 * d1), a2 = 2.0 / (9.0 * d2);
     return ((1.0 - a2) * c - (1.0 - a1)) / std::sqrt(a2 * c * c + a1);
+}
+
+// Whether paulson_z(f, d1, d2) may exceed z, f > 0: false only where it surely does not. z
+// grows with the cube root c where a1, a2 < 1 (dz/dc = ((1 - a2) a1 + a2 c (1 - a1)) / D^3),
+// and c <= (f + 2) / 3 (the mean of f, 1, 1 bounds their geometric mean): no cube root. The
+// margin 1e-6 is far above the rounding (~1e-8 where a1 is least).
+inline bool paulson_may_exceed(double f, double d1, double d2, double z) noexcept {
+    const double a1 = 2.0 / (9.0 * d1), a2 = 2.0 / (9.0 * d2);
+    if (!(a1 < 1.0 && a2 < 1.0)) return true;
+    const double c = (f + 2.0) / 3.0;
+    return !(((1.0 - a2) * c - (1.0 - a1)) / std::sqrt(a2 * c * c + a1) < z - 1e-6);
 }
 
 // P(F > f) for F(d1, d2), f > 0: I_y(d2/2, d1/2) with y = d2 / (d2 + d1 f), by the continued
@@ -510,8 +530,10 @@ inline double local_score(const local_test_options& o, const local_levels_q& k, 
     // Screens, from r~ >= r_other (m <= 1 / r_other): the pair statistic with the other half's
     // own r bounds T from above and the threshold from below; for the spatial test, the
     // level ratio must exceed 1 and Paulson's z at m = 1 / r_other must come near z_q.
-    const double t_pair = pair_statistic(l_hi, l_lo, r_other);
-    const bool pair_may = t_pair > zq && t_pair > t_threshold(band, q, std::min(2.0 / r_other, 1e10));
+    const bool pair_may = pair_may_exceed(l_hi, l_lo, r_other, zq) && [&] {
+        const double t_pair = pair_statistic(l_hi, l_lo, r_other);
+        return t_pair > zq && t_pair > t_threshold(band, q, std::min(2.0 / r_other, 1e10));
+    }();
     double mu = 0;
     bool spatial_may = false;
     if (o.spatial) {
@@ -519,6 +541,7 @@ inline double local_score(const local_test_options& o, const local_levels_q& k, 
         const double sum = neighbour_sum(s, w, h, x, y, o.radius, band.window, count);
         const double m_max = 1.0 / r_other, n = static_cast<double>(count);
         spatial_may = count >= static_cast<std::size_t>(o.min_neighbours) && sum > 0 && l_hi * n > sum &&
+                      paulson_may_exceed(l_hi * n / sum, 2.0 * m_max, 2.0 * n * m_max, zq - 1.0) &&
                       paulson_z(l_hi * n / sum, 2.0 * m_max, 2.0 * n * m_max) > zq - 1.0;
         if (spatial_may) mu = neighbour_levels(s, w, h, x, y, o.radius, band.levels);
     }
