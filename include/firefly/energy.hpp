@@ -990,15 +990,16 @@ energy_totals return_energy_to_image(const image_view<C>& color, const std::uint
             }
     };
     energy_model_rows(s.excess, shape_row, w, h, sigma, s, exec);
+    // row-major, as over every pixel: the others' excess is +0 and adds nothing (excess_map)
+    for (const detail::excess_pixel& e : s.where.pixels) t.removed += (e.v[0] + e.v[1] + e.v[2]) / 3.0;
     detail::energy_rows rows(s);
     std::vector<double> row_add(static_cast<std::size_t>(w) * 3);
     for (int y = 0; y < h; ++y) {
         rows.row(y, row_add.data());
         for (int x = 0; x < w; ++x) {
             const std::size_t p = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
-            t.removed += (static_cast<double>(s.excess[p * 3]) + s.excess[p * 3 + 1] + s.excess[p * 3 + 2]) / 3.0;
-            if (!keep[p]) continue;
             const double* add = &row_add[static_cast<std::size_t>(x) * 3];
+            if (!keep[p] || !(add[0] + add[1] + add[2] > 0)) continue;  // (each add is >= 0)
             const double mean_add = (add[0] + add[1] + add[2]) / 3.0;
             if (!(mean_add > 0)) continue;
             double old[3];
