@@ -321,18 +321,28 @@ struct pooled_estimate {
     double typical = 0;  // exp(median log r): the neighbourhood's typical r, uncorrected
 };
 
+// Room in pool for a value per half of every neighbour at this radius (written by index: these
+// loops run per screened pixel and per outlier, and push_back checks capacity per value).
+inline float* pool_room(std::vector<float>& pool, int radius) {
+    const std::size_t side = 2 * static_cast<std::size_t>(radius) + 1;
+    if (pool.size() < 2 * (side * side - 1)) pool.resize(2 * (side * side - 1));
+    return pool.data();
+}
+
 inline pooled_estimate pooled_relative_variance(const std::vector<float> (&rel_var)[2], int w, int h, int x, int y,
                                                 int radius, int min_count, std::vector<float>& pool) {
-    pool.clear();
+    float* p = pool_room(pool, radius);
+    const float* rv[2] = {rel_var[0].data(), rel_var[1].data()};
+    std::size_t count = 0;
     for_each_neighbour(w, h, x, y, radius, [&](std::size_t j) {
         for (int half = 0; half < 2; ++half)
-            if (rel_var[half][j] == rel_var[half][j]) pool.push_back(std::log(rel_var[half][j]));
+            if (rv[half][j] == rv[half][j]) p[count++] = std::log(rv[half][j]);
     });
     pooled_estimate e;
-    if (pool.size() < static_cast<std::size_t>(std::max(min_count, 1))) return e;
-    const double n = static_cast<double>(pool.size());
+    if (count < static_cast<std::size_t>(std::max(min_count, 1))) return e;
+    const double n = static_cast<double>(count);
     double med = 0, mad = 0;
-    median_and_mad(pool.data(), pool.size(), med, mad);
+    median_and_mad(p, count, med, mad);
     const double s = mad / 0.6744897501960817;
     // The sample relative variance of a skewed law is biased low: E[r^] ~ r (1 - r) for a
     // gamma law (skewness 2 sqrt(r N)); 1 + r undoes it to first order.
@@ -350,14 +360,16 @@ inline pooled_estimate pooled_relative_variance(const std::vector<float> (&rel_v
 // NaN when fewer than min_count neighbours have both halves usable.
 inline double neighbourhood_lower_level(const std::vector<double> (&level)[2], int w, int h, int x, int y,
                                         int radius, int min_count, std::vector<float>& pool) {
-    pool.clear();
+    float* p = pool_room(pool, radius);
+    const double *l0 = level[0].data(), *l1 = level[1].data();
+    std::size_t count = 0;
     for_each_neighbour(w, h, x, y, radius, [&](std::size_t j) {
-        const double a = level[0][j], b = level[1][j];
-        if (a == a && b == b) pool.push_back(static_cast<float>(std::min(a, b)));
+        const double a = l0[j], b = l1[j];
+        if (a == a && b == b) p[count++] = static_cast<float>(std::min(a, b));
     });
-    if (pool.size() < static_cast<std::size_t>(std::max(min_count, 1))) return std::numeric_limits<double>::quiet_NaN();
+    if (count < static_cast<std::size_t>(std::max(min_count, 1))) return std::numeric_limits<double>::quiet_NaN();
     double med = 0, mad = 0;
-    median_and_mad(pool.data(), pool.size(), med, mad);
+    median_and_mad(p, count, med, mad);
     return med;
 }
 
