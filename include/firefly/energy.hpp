@@ -427,7 +427,7 @@ inline void energy_x_then_y(const std::vector<P>& profile, const excess_map& whe
                             energy_scratch& s, const executor& exec) {
     const std::size_t nx = static_cast<std::size_t>(ax.count), hh = static_cast<std::size_t>(h);
     const int reach = static_cast<int>(t[0].w.size());  // pixels from a node to its last tap, at most
-    constexpr std::size_t band = 32;
+    constexpr std::size_t band = 64;  // node columns a task: a row's 6 sigma overlap shared by more
     s.xy.resize(static_cast<std::size_t>(ay.count) * nx * record);
     exec.run((nx + band - 1) / band, [&](std::size_t bi) {
         const std::size_t j0 = bi * band, j1 = std::min(nx, j0 + band);
