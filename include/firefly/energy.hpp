@@ -252,9 +252,9 @@ struct excess_pixel {
 struct excess_map {
     std::vector<std::size_t> start;  // h + 1: row y's pixels are [start[y], start[y + 1])
     std::vector<excess_pixel> pixels;
-    bool row(int y) const noexcept { return start[static_cast<std::size_t>(y) + 1] > start[static_cast<std::size_t>(y)]; }
     const excess_pixel* first(int y) const noexcept { return pixels.data() + start[static_cast<std::size_t>(y)]; }
     const excess_pixel* last(int y) const noexcept { return pixels.data() + start[static_cast<std::size_t>(y) + 1]; }
+    bool row(int y) const noexcept { return last(y) != first(y); }
     std::size_t bytes() const noexcept {
         return start.capacity() * sizeof(std::size_t) + pixels.capacity() * sizeof(excess_pixel);
     }
@@ -312,7 +312,8 @@ inline void map_excess(const std::vector<E>& excess, int w, int h, excess_map& m
         for (std::size_t x = 0; x < n1; ++x) {
             if (!counts(y, x)) continue;
             const E* e = &excess[(y * n1 + x) * 3];
-            *o++ = {static_cast<int>(x), {static_cast<double>(e[0]), static_cast<double>(e[1]), static_cast<double>(e[2]), squared(e)}};
+            *o++ = {static_cast<int>(x),
+                    {static_cast<double>(e[0]), static_cast<double>(e[1]), static_cast<double>(e[2]), squared(e)}};
         }
     });
 }

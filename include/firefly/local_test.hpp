@@ -154,7 +154,8 @@ struct local_band_scratch {
     local_test_result found;         // this band's flags and counts
     std::size_t bytes() const noexcept {
         return (levels.capacity() + thresholds.capacity()) * sizeof(double) + pool.capacity() * sizeof(float) +
-               window.capacity() * sizeof(std::ptrdiff_t) + (found.half[0].index.capacity() + found.half[1].index.capacity()) * 16;
+               window.capacity() * sizeof(std::ptrdiff_t) +
+               (found.half[0].index.capacity() + found.half[1].index.capacity()) * 16;
     }
 };
 

@@ -589,7 +589,8 @@ private:
             const int x = static_cast<int>(pairs_[j] % static_cast<std::uint32_t>(w));
             const int y = static_cast<int>(pairs_[j] / static_cast<std::uint32_t>(w));
             const neighbourhood nb = neighbourhood_at(x, y, w, a.color.height(), pool);  // both halves'
-            for (int h = 0; h < 2; ++h) pair_log_p_[j * 2 + static_cast<std::size_t>(h)] = excess_log_p(hb, h, x, y, cal, nb);
+            for (int h = 0; h < 2; ++h)
+                pair_log_p_[j * 2 + static_cast<std::size_t>(h)] = excess_log_p(hb, h, x, y, cal, nb);
         });
     }
 
