@@ -45,6 +45,7 @@
 
 #include <algorithm>
 #include <cfloat>
+#include <climits>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -110,15 +111,22 @@ inline constexpr int record = 8;
 // weights squared, for the sum of squared weights of the James-Stein factor. `rec`: each tap's
 // weights of a record's values (w on M and L, sq on V and the relative V), record after record:
 // one weight per value lets the sums run on whole records at a time (they vectorise).
+// `profile`, `excess`: the same for a record's parts summed apart, L (3 values: w) and M, V (4
+// values: w, w, w, sq; see excess_map).
 struct tap_weights {
-    std::vector<double> w, sq, rec;
+    std::vector<double> w, sq, rec, profile, excess;
     bool half = false;
 };
 
 inline void set_record_weights(tap_weights& t) {
     t.rec.resize(t.w.size() * record);
-    for (std::size_t d = 0; d < t.w.size(); ++d)
+    t.profile.resize(t.w.size() * 3);
+    t.excess.resize(t.w.size() * 4);
+    for (std::size_t d = 0; d < t.w.size(); ++d) {
         for (std::size_t k = 0; k < record; ++k) t.rec[d * record + k] = k < 6 ? t.w[d] : t.sq[d];
+        for (std::size_t k = 0; k < 3; ++k) t.profile[d * 3 + k] = t.excess[d * 4 + k] = t.w[d];
+        t.excess[d * 4 + 3] = t.sq[d];
+    }
 }
 
 inline tap_weights make_taps(double sigma, int r, bool half) {
@@ -230,6 +238,28 @@ inline void median3x3(const std::vector<double>& in, std::vector<double>& out, i
                    exec);
 }
 
+// One pixel of removed excess: its column, and the M and V values of its record (e, 3
+// channels, and |e|^2), in double.
+struct excess_pixel {
+    int x;
+    double v[4];
+};
+
+// Where the removed excess is: the pixels where it is not 0, row after row (x ascending).
+// Elsewhere the M and V sums get terms of +-0, and a sum begun at +0 stays +0 bit for bit
+// under such terms (x + -0 = x; a sum reaches -0 only from -0 + -0): the sums run over these
+// pixels alone, in the taps' order, with the same bits.
+struct excess_map {
+    std::vector<std::size_t> start;  // h + 1: row y's pixels are [start[y], start[y + 1])
+    std::vector<excess_pixel> pixels;
+    const excess_pixel* first(int y) const noexcept { return pixels.data() + start[static_cast<std::size_t>(y)]; }
+    const excess_pixel* last(int y) const noexcept { return pixels.data() + start[static_cast<std::size_t>(y) + 1]; }
+    bool row(int y) const noexcept { return last(y) != first(y); }
+    std::size_t bytes() const noexcept {
+        return start.capacity() * sizeof(std::size_t) + pixels.capacity() * sizeof(excess_pixel);
+    }
+};
+
 }  // namespace detail
 
 // Work arrays of the energy return, kept between frames. Frame-sized: the profile (and, in
@@ -244,8 +274,9 @@ struct energy_scratch {
     std::vector<double> cells, coarse;  // the coarse scale: cell sums, their Gaussian (empty: off)
     detail::cell_axis cx, cy;           // where the cells are
     double coarse_var_scale = 0;        // sum w_fine^2 / sum w_coarse^2 (per pixel weights)
+    detail::excess_map where;           // the excess pixels
     std::size_t bytes() const noexcept {
-        return profile.capacity() * sizeof(float) +
+        return profile.capacity() * sizeof(float) + where.bytes() +
                (xy.capacity() + yx.capacity() + factor.capacity() + cells.capacity() + coarse.capacity()) * sizeof(double) +
                excess.capacity() * sizeof(float);
     }
@@ -260,34 +291,31 @@ inline double squared(const E* e) noexcept {
     return a * a + b * b + c * c;
 }
 
-// Where the removed excess is: per row, and per stretch of `chunk` pixels of a row, whether any
-// value is != 0. Elsewhere the M and V sums get terms of +-0, and a sum begun at +0 stays +0 bit
-// for bit under such terms (x + -0 = x; a sum reaches -0 only from -0 + -0): those terms are
-// skipped (or read as +0) with the same bits.
-struct excess_map {
-    static constexpr int chunk = 64;
-    std::size_t chunks = 0;                 // per row
-    std::vector<std::uint8_t> rows, parts;  // h; h x chunks
-    bool row(int y) const noexcept { return rows[static_cast<std::size_t>(y)] != 0; }
-    bool part(int y, std::size_t k) const noexcept { return parts[static_cast<std::size_t>(y) * chunks + k] != 0; }
-};
-
+// The excess_map of a frame's excess into m (its memory kept from frame to frame).
 template <class E>
-inline excess_map map_excess(const std::vector<E>& excess, int w, int h, const executor& exec) {
-    excess_map m;
-    m.chunks = static_cast<std::size_t>((w + excess_map::chunk - 1) / excess_map::chunk);
-    m.rows.assign(static_cast<std::size_t>(h), 0);
-    m.parts.assign(static_cast<std::size_t>(h) * m.chunks, 0);
-    const std::size_t n = static_cast<std::size_t>(w) * 3, c3 = excess_map::chunk * 3;
-    exec.run(m.rows.size(), [&](std::size_t y) {
-        const E* e = &excess[y * n];
-        for (std::size_t k = 0; k < m.chunks; ++k) {
-            const bool any = std::any_of(e + k * c3, e + std::min(n, (k + 1) * c3), [](E v) { return v != E(0); });
-            m.parts[y * m.chunks + k] = any ? 1 : 0;
-            m.rows[y] = m.rows[y] || any ? 1 : 0;
+inline void map_excess(const std::vector<E>& excess, int w, int h, excess_map& m, const executor& exec) {
+    m.start.assign(static_cast<std::size_t>(h) + 1, 0);
+    const std::size_t n1 = static_cast<std::size_t>(w);
+    auto counts = [&](std::size_t y, std::size_t x) {
+        const E* e = &excess[(y * n1 + x) * 3];
+        return (e[0] != E(0)) | (e[1] != E(0)) | (e[2] != E(0));
+    };
+    exec.run(static_cast<std::size_t>(h), [&](std::size_t y) {
+        std::size_t k = 0;
+        for (std::size_t x = 0; x < n1; ++x) k += counts(y, x) ? 1 : 0;
+        m.start[y + 1] = k;
+    });
+    for (std::size_t y = 0; y < static_cast<std::size_t>(h); ++y) m.start[y + 1] += m.start[y];
+    m.pixels.resize(m.start.back());
+    exec.run(static_cast<std::size_t>(h), [&](std::size_t y) {
+        excess_pixel* o = m.pixels.data() + m.start[y];
+        for (std::size_t x = 0; x < n1; ++x) {
+            if (!counts(y, x)) continue;
+            const E* e = &excess[(y * n1 + x) * 3];
+            *o++ = {static_cast<int>(x),
+                    {static_cast<double>(e[0]), static_cast<double>(e[1]), static_cast<double>(e[2]), squared(e)}};
         }
     });
-    return m;
 }
 
 // Pixels x0..x1 of one row of the model's inputs as records (at out + x record): e (3
@@ -307,69 +335,119 @@ inline void input_records(const E* e, const P* pr, bool has_e, int x0, int x1, d
     }
 }
 
-// One tap of record_sums into sum, with the tap's record weights wk. Opposite taps are added
-// first (a + b): a mirrored line gives the mirrored result bit for bit.
+// One tap of record_sums into sum (K values), with the tap's weights wk. Opposite taps are
+// added first (a + b): a mirrored line gives the mirrored result bit for bit.
+template <int K>
 inline void add_tap(double* sum, const double* wk, const double* a) noexcept {  // the centre
-    for (int k = 0; k < record; ++k) sum[k] += wk[k] * a[k];
+    for (int k = 0; k < K; ++k) sum[k] += wk[k] * a[k];
 }
+template <int K>
 inline void add_tap(double* sum, const double* wk, const double* a, const double* b) noexcept {
-    for (int k = 0; k < record; ++k) sum[k] += wk[k] * (a[k] + b[k]);
+    for (int k = 0; k < K; ++k) sum[k] += wk[k] * (a[k] + b[k]);
 }
 inline constexpr double zero_record[record] = {};  // the side of a tap outside the frame: x + 0
 
-// The record at node p2 along a line of n records (record i at line + i stride): the separable
-// Gaussian's taps over M and L, the squared taps over V, each value taken in double.
-inline void record_sums(int p2, const tap_weights& tw, int n, const double* line, std::size_t stride,
-                        double* out) noexcept {
-    double sum[record] = {};
+// The sums at node p2 along a line of n records of K values (record i at line + i stride): the
+// separable Gaussian's taps, `weights` K per tap (a tap_weights' rec, profile or excess), each
+// value taken in double.
+template <int K>
+inline void tap_sums(int p2, const tap_weights& tw, const double* weights, int n, const double* line,
+                     std::size_t stride, double* out) noexcept {
+    double sum[K] = {};
     auto rec = [&](int i) { return line + static_cast<std::size_t>(i) * stride; };
-    auto wk = [&](std::size_t d) { return &tw.rec[d * record]; };
+    auto wk = [&](std::size_t d) { return weights + d * K; };
     const int r = static_cast<int>(tw.w.size()) - 1, half = tw.half ? 1 : 0;
     const int lo = (p2 - half) / 2, hi = (p2 + half) / 2;  // tap 0's pixels (p2 - half is even)
     if (lo - r >= 0 && hi + r < n) {  // every tap inside the line (most nodes): no tests
         const double *a = rec(lo), *b = rec(hi);
         std::size_t d = 0;
-        if (!tw.half) add_tap(sum, wk(0), a), d = 1;  // the centre: counted once
-        for (; d < tw.w.size(); ++d) add_tap(sum, wk(d), a - d * stride, b + d * stride);
+        if (!tw.half) add_tap<K>(sum, wk(0), a), d = 1;  // the centre: counted once
+        for (; d < tw.w.size(); ++d) add_tap<K>(sum, wk(d), a - d * stride, b + d * stride);
     } else {
         for (std::size_t d = 0; d < tw.w.size(); ++d) {
             const tap_pair p = taps_at(p2, static_cast<int>(d), tw.half, n);
             if (p.lo < 0 && p.hi < 0) continue;  // a node outside the frame: no centre pixel
             if (d == 0 && !tw.half)
-                add_tap(sum, wk(d), rec(p.lo));
+                add_tap<K>(sum, wk(d), rec(p.lo));
             else if (p.lo >= 0 && p.hi >= 0)
-                add_tap(sum, wk(d), rec(p.lo), rec(p.hi));
+                add_tap<K>(sum, wk(d), rec(p.lo), rec(p.hi));
             else
-                add_tap(sum, wk(d), rec(p.lo >= 0 ? p.lo : p.hi), zero_record);
+                add_tap<K>(sum, wk(d), rec(p.lo >= 0 ? p.lo : p.hi), zero_record);
         }
     }
-    std::copy_n(sum, record, out);
+    std::copy_n(sum, K, out);
 }
 
-// x first, a band of node columns at a time: every row's records at the band's columns (the
-// row's stretch under the band taken to records once for all of them), then along y at the
-// node rows. Nothing frame-sized.
-template <class E, class P>
-inline void energy_x_then_y(const std::vector<E>& excess, const std::vector<P>& profile, const excess_map& where,
+// The record at node p2 along a line of n whole records: M and L with the taps, V with the
+// squared taps.
+inline void record_sums(int p2, const tap_weights& tw, int n, const double* line, std::size_t stride,
+                        double* out) noexcept {
+    tap_sums<record>(p2, tw, tw.rec.data(), n, line, stride, out);
+}
+
+// M and V (4 values: excess_pixel::v) of record_sums at node p2 along a row, from the row's
+// excess pixels [first, last) alone (excess_map): the taps nearest first, as record_sums adds
+// them, a tap whose two pixels hold no excess skipped.
+inline void excess_sums(int p2, const tap_weights& tw, const excess_pixel* first, const excess_pixel* last,
+                        double* out) noexcept {
+    double sum[4] = {};
+    const int r = static_cast<int>(tw.w.size()) - 1, half = tw.half ? 1 : 0;
+    const int lo = (p2 - half) / 2, hi = (p2 + half) / 2;
+    const excess_pixel* right = std::lower_bound(first, last, hi, [](const excess_pixel& e, int x) { return e.x < x; });
+    const excess_pixel* left = right;  // the left side: left[-1], left[-2], ... (x <= lo)
+    if (!tw.half && right != last && right->x == lo) add_tap<4>(sum, &tw.excess[0], right->v), ++right;
+    for (;;) {
+        const int dl = left != first && lo - left[-1].x <= r ? lo - left[-1].x : r + 1;
+        const int dr = right != last && right->x - hi <= r ? right->x - hi : r + 1;
+        const int d = std::min(dl, dr);
+        if (d > r) break;
+        const double* wk = &tw.excess[static_cast<std::size_t>(d) * 4];
+        if (dl == dr)
+            add_tap<4>(sum, wk, left[-1].v, right->v), --left, ++right;
+        else if (dl < dr)
+            add_tap<4>(sum, wk, left[-1].v, zero_record), --left;
+        else
+            add_tap<4>(sum, wk, right->v, zero_record), ++right;
+    }
+    std::copy_n(sum, 4, out);
+}
+
+// The L values (the profile, 3 channels) of pixels x0..x1 of one row into out + 3 x, in double.
+template <class P>
+inline void profile_line(const P* pr, int x0, int x1, double* out) noexcept {
+    for (std::size_t q = static_cast<std::size_t>(x0) * 3; q < static_cast<std::size_t>(x1 + 1) * 3; ++q)
+        out[q] = static_cast<double>(pr[q]);
+}
+
+// x first, a band of node columns at a time: every row's records at the band's columns (L from
+// the row's stretch under the band, taken to double once for all of them; M and V from the
+// row's excess pixels), then along y at the node rows. Nothing frame-sized.
+template <class P>
+inline void energy_x_then_y(const std::vector<P>& profile, const excess_map& where,
                             int w, int h, const node_axis& ax, const node_axis& ay, const tap_weights (&t)[2],
                             energy_scratch& s, const executor& exec) {
     const std::size_t nx = static_cast<std::size_t>(ax.count), hh = static_cast<std::size_t>(h);
     const int reach = static_cast<int>(t[0].w.size());  // pixels from a node to its last tap, at most
-    constexpr std::size_t band = 32;
+    constexpr std::size_t band = 64;  // node columns a task: a row's 6 sigma overlap shared by more
     s.xy.resize(static_cast<std::size_t>(ay.count) * nx * record);
     exec.run((nx + band - 1) / band, [&](std::size_t bi) {
         const std::size_t j0 = bi * band, j1 = std::min(nx, j0 + band);
         const int x0 = std::max(0, ax.pos2(static_cast<int>(j0)) / 2 - reach);
         const int x1 = std::min(w - 1, ax.pos2(static_cast<int>(j1 - 1)) / 2 + reach);
         thread_local std::vector<double> line, columns;  // per thread, kept (see median3x3_rows)
-        line.resize(static_cast<std::size_t>(w) * record);
+        line.resize(static_cast<std::size_t>(w) * 3);
         columns.resize((j1 - j0) * hh * record);
         for (std::size_t y = 0; y < hh; ++y) {
-            const std::size_t at = y * static_cast<std::size_t>(w) * 3;
-            input_records(&excess[at], &profile[at], where.row(static_cast<int>(y)), x0, x1, line.data());
+            profile_line(&profile[y * static_cast<std::size_t>(w) * 3], x0, x1, line.data());
+            const excess_pixel *first = where.first(static_cast<int>(y)), *last = where.last(static_cast<int>(y));
             for (std::size_t j = j0; j < j1; ++j) {
                 const int p2 = ax.pos2(static_cast<int>(j));
-                record_sums(p2, t[(p2 & 1) != 0], w, line.data(), record, &columns[((j - j0) * hh + y) * record]);
+                const tap_weights& tw = t[(p2 & 1) != 0];
+                double* o = &columns[((j - j0) * hh + y) * record];
+                double mv[4];
+                tap_sums<3>(p2, tw, tw.profile.data(), w, line.data(), 3, o + 3);
+                excess_sums(p2, tw, first, last, mv);
+                o[0] = mv[0], o[1] = mv[1], o[2] = mv[2], o[6] = mv[3], o[7] = 0.0;
             }
         }
         for (std::size_t j = j0; j < j1; ++j)
@@ -396,36 +474,41 @@ inline void add_rows(double* dst, std::size_t q0, std::size_t q1, Row&& row, dou
         for (std::size_t q = q0; q < q1; ++q) dst[q] += wd * (static_cast<double>((a ? a : b)[q]) + 0.0);
 }
 
-// |e|^2 of rows y0..y1 of the excess (row y at out + (y - y0) w), +0 where there is none.
-template <class E>
-inline void squares(const std::vector<E>& excess, const excess_map& where, int w, int y0, int y1,
-                    std::vector<double>& out) {
-    const std::size_t n1 = static_cast<std::size_t>(w);
-    out.resize(static_cast<std::size_t>(y1 - y0 + 1) * n1);
-    for (int y = y0; y <= y1; ++y)
-        for (std::size_t k = 0; k < where.chunks; ++k) {
-            const std::size_t x0 = k * excess_map::chunk, x1 = std::min(n1, x0 + excess_map::chunk);
-            double* o = &out[static_cast<std::size_t>(y - y0) * n1];
-            const E* e = &excess[static_cast<std::size_t>(y) * n1 * 3];
-            if (!where.part(y, k)) std::fill(o + x0, o + x1, 0.0);
-            else
-                for (std::size_t x = x0; x < x1; ++x) o[x] = squared(e + x * 3);
-        }
+// Tap d of the sums along y into m (3 channels) and v (|e|^2) of every column, from the excess
+// pixels of rows p.lo and p.hi alone (excess_map), merged by column: each column's sums take
+// their terms in the taps' order (d ascending), as add_rows adds them, without the zeros.
+inline void add_excess_rows(double* m, double* v, const tap_weights& tw, std::size_t d, const tap_pair& p,
+                            bool centre, const excess_map& where) noexcept {
+    const excess_pixel *a = nullptr, *a_end = nullptr, *b = nullptr, *b_end = nullptr;
+    if (p.lo >= 0) a = where.first(p.lo), a_end = where.last(p.lo);
+    if (p.hi >= 0 && !centre) b = where.first(p.hi), b_end = where.last(p.hi);
+    const double* wk = &tw.excess[d * 4];
+    auto put = [&](int x, const double* sum) {
+        for (std::size_t c = 0; c < 3; ++c) m[static_cast<std::size_t>(x) * 3 + c] = sum[c];
+        v[x] = sum[3];
+    };
+    while (a != a_end || b != b_end) {
+        const int xa = a != a_end ? a->x : INT_MAX, xb = b != b_end ? b->x : INT_MAX;
+        const int x = std::min(xa, xb);
+        double sum[4] = {m[static_cast<std::size_t>(x) * 3], m[static_cast<std::size_t>(x) * 3 + 1],
+                         m[static_cast<std::size_t>(x) * 3 + 2], v[x]};
+        if (centre)
+            add_tap<4>(sum, wk, (a++)->v);
+        else if (xa == xb)
+            add_tap<4>(sum, wk, (a++)->v, (b++)->v);
+        else
+            add_tap<4>(sum, wk, xa < xb ? (a++)->v : (b++)->v, zero_record);
+        put(x, sum);
+    }
 }
 
 // The sums along y at node row p2 (taps tw) for every column, as records in `line`: L from every
-// tap's rows, M and V (|e|^2 from e2, rows from y0 on) only from the stretches holding excess.
-template <class E, class P>
-inline void y_sums(int p2, const tap_weights& tw, int w, int h, const std::vector<E>& excess,
-                   const std::vector<P>& profile, const excess_map& where, const std::vector<double>& e2, int y0,
-                   std::vector<double>& line) {
+// tap's rows, M and V only from the pixels holding excess.
+template <class P>
+inline void y_sums(int p2, const tap_weights& tw, int w, int h, const std::vector<P>& profile,
+                   const excess_map& where, std::vector<double>& line) {
     const std::size_t n3 = static_cast<std::size_t>(w) * 3, n1 = static_cast<std::size_t>(w);
-    auto excess_row = [&](int y) { return &excess[static_cast<std::size_t>(y) * n3]; };
     auto profile_row = [&](int y) { return &profile[static_cast<std::size_t>(y) * n3]; };
-    auto e2_row = [&](int y) { return &e2[static_cast<std::size_t>(y - y0) * n1]; };
-    auto has_excess = [&](const tap_pair& p, std::size_t k) {
-        return (p.lo >= 0 && where.part(p.lo, k)) || (p.hi >= 0 && where.part(p.hi, k));
-    };
     thread_local std::vector<double> m, l, v;  // per thread, kept (see median3x3_rows)
     m.assign(n3, 0.0), l.assign(n3, 0.0), v.assign(n1, 0.0);
     for (std::size_t d = 0; d < tw.w.size(); ++d) {
@@ -433,12 +516,7 @@ inline void y_sums(int p2, const tap_weights& tw, int w, int h, const std::vecto
         if (p.lo < 0 && p.hi < 0) continue;
         const bool centre = d == 0 && !tw.half;
         add_rows(l.data(), 0, n3, profile_row, tw.w[d], p, centre);
-        for (std::size_t k = 0; k < where.chunks; ++k) {
-            if (!has_excess(p, k)) continue;
-            const std::size_t x0 = k * excess_map::chunk, x1 = std::min(n1, x0 + excess_map::chunk);
-            add_rows(m.data(), x0 * 3, x1 * 3, excess_row, tw.w[d], p, centre);
-            add_rows(v.data(), x0, x1, e2_row, tw.sq[d], p, centre);
-        }
+        add_excess_rows(m.data(), v.data(), tw, d, p, centre, where);
     }
     line.resize(n1 * record);
     for (std::size_t x = 0; x < n1; ++x) {
@@ -452,30 +530,21 @@ inline void y_sums(int p2, const tap_weights& tw, int w, int h, const std::vecto
     }
 }
 
-// y first, a band of node rows at a time (|e|^2 of the rows they reach taken once): at each
-// node row the sums along y for every column, then along x at the node columns. With x first,
-// the two orders a transposed frame swaps.
-template <class E, class P>
-inline void energy_y_then_x(const std::vector<E>& excess, const std::vector<P>& profile, const excess_map& where,
-                            int w, int h, const node_axis& ax, const node_axis& ay, const tap_weights (&t)[2],
-                            energy_scratch& s, const executor& exec) {
+// y first, a node row at a time: the sums along y for every column, then along x at the node
+// columns. With x first, the two orders a transposed frame swaps.
+template <class P>
+inline void energy_y_then_x(const std::vector<P>& profile, const excess_map& where, int w, int h,
+                            const node_axis& ax, const node_axis& ay, const tap_weights (&t)[2], energy_scratch& s,
+                            const executor& exec) {
     const std::size_t nx = static_cast<std::size_t>(ax.count), ny = static_cast<std::size_t>(ay.count);
-    const int reach = static_cast<int>(t[0].w.size());  // pixels from a node to its last tap, at most
-    constexpr std::size_t band = 8;
     s.yx.resize(ny * nx * record);
-    exec.run((ny + band - 1) / band, [&](std::size_t bi) {
-        const std::size_t i0 = bi * band, i1 = std::min(ny, i0 + band);
-        const int y0 = std::max(0, ay.pos2(static_cast<int>(i0)) / 2 - reach);
-        const int y1 = std::min(h - 1, ay.pos2(static_cast<int>(i1 - 1)) / 2 + reach);
-        thread_local std::vector<double> e2, line;  // per thread, kept (see median3x3_rows)
-        squares(excess, where, w, y0, y1, e2);
-        for (std::size_t i = i0; i < i1; ++i) {
-            const int p2 = ay.pos2(static_cast<int>(i));
-            y_sums(p2, t[(p2 & 1) != 0], w, h, excess, profile, where, e2, y0, line);
-            for (std::size_t j = 0; j < nx; ++j) {
-                const int q2 = ax.pos2(static_cast<int>(j));
-                record_sums(q2, t[(q2 & 1) != 0], w, line.data(), record, &s.yx[(i * nx + j) * record]);
-            }
+    exec.run(ny, [&](std::size_t i) {
+        thread_local std::vector<double> line;  // per thread, kept (see median3x3_rows)
+        const int p2 = ay.pos2(static_cast<int>(i));
+        y_sums(p2, t[(p2 & 1) != 0], w, h, profile, where, line);
+        for (std::size_t j = 0; j < nx; ++j) {
+            const int q2 = ax.pos2(static_cast<int>(j));
+            record_sums(q2, t[(q2 & 1) != 0], w, line.data(), record, &s.yx[(i * nx + j) * record]);
         }
     });
 }
@@ -754,10 +823,10 @@ inline void energy_model_rows(const std::vector<E>& excess, ShapeRows&& shape_ro
     s.ax = detail::make_node_axis(w, step);
     s.ay = detail::make_node_axis(h, step);
     detail::median3x3_rows(shape_rows, s.profile, w, h, exec);
-    const detail::excess_map where = detail::map_excess(excess, w, h, exec);
-    detail::energy_x_then_y(excess, s.profile, where, w, h, s.ax, s.ay, taps, s, exec);
-    detail::energy_y_then_x(excess, s.profile, where, w, h, s.ax, s.ay, taps, s, exec);
-    detail::coarse_model(excess, where, w, h, sc, taps[0], s, exec);
+    detail::map_excess(excess, w, h, s.where, exec);
+    detail::energy_x_then_y(s.profile, s.where, w, h, s.ax, s.ay, taps, s, exec);
+    detail::energy_y_then_x(s.profile, s.where, w, h, s.ax, s.ay, taps, s, exec);
+    detail::coarse_model(excess, s.where, w, h, sc, taps[0], s, exec);
     detail::energy_factors(s);
 }
 
@@ -922,15 +991,16 @@ energy_totals return_energy_to_image(const image_view<C>& color, const std::uint
             }
     };
     energy_model_rows(s.excess, shape_row, w, h, sigma, s, exec);
+    // row-major, as over every pixel: the others' excess is +0 and adds nothing (excess_map)
+    for (const detail::excess_pixel& e : s.where.pixels) t.removed += (e.v[0] + e.v[1] + e.v[2]) / 3.0;
     detail::energy_rows rows(s);
     std::vector<double> row_add(static_cast<std::size_t>(w) * 3);
     for (int y = 0; y < h; ++y) {
         rows.row(y, row_add.data());
         for (int x = 0; x < w; ++x) {
             const std::size_t p = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
-            t.removed += (static_cast<double>(s.excess[p * 3]) + s.excess[p * 3 + 1] + s.excess[p * 3 + 2]) / 3.0;
-            if (!keep[p]) continue;
             const double* add = &row_add[static_cast<std::size_t>(x) * 3];
+            if (!keep[p] || !(add[0] + add[1] + add[2] > 0)) continue;  // (each add is >= 0)
             const double mean_add = (add[0] + add[1] + add[2]) / 3.0;
             if (!(mean_add > 0)) continue;
             double old[3];

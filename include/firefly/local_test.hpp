@@ -148,11 +148,13 @@ struct local_test_result {
 struct local_band_scratch {
     std::vector<float> pool;
     std::vector<double> levels;      // the neighbourhood's levels (spatial test)
+    std::vector<std::ptrdiff_t> window;  // detail::window_offsets
     std::vector<double> thresholds;  // t_df(q) by df grid step (see detail::t_threshold)
     double thresholds_q = 0;
     local_test_result found;         // this band's flags and counts
     std::size_t bytes() const noexcept {
         return (levels.capacity() + thresholds.capacity()) * sizeof(double) + pool.capacity() * sizeof(float) +
+               window.capacity() * sizeof(std::ptrdiff_t) +
                (found.half[0].index.capacity() + found.half[1].index.capacity()) * 16;
     }
 };
@@ -320,18 +322,28 @@ struct pooled_estimate {
     double typical = 0;  // exp(median log r): the neighbourhood's typical r, uncorrected
 };
 
+// Room in pool for a value per half of every neighbour at this radius (written by index: these
+// loops run per screened pixel and per outlier, and push_back checks capacity per value).
+inline float* pool_room(std::vector<float>& pool, int radius) {
+    const std::size_t side = 2 * static_cast<std::size_t>(radius) + 1;
+    if (pool.size() < 2 * (side * side - 1)) pool.resize(2 * (side * side - 1));
+    return pool.data();
+}
+
 inline pooled_estimate pooled_relative_variance(const std::vector<float> (&rel_var)[2], int w, int h, int x, int y,
                                                 int radius, int min_count, std::vector<float>& pool) {
-    pool.clear();
+    float* p = pool_room(pool, radius);
+    const float* rv[2] = {rel_var[0].data(), rel_var[1].data()};
+    std::size_t count = 0;
     for_each_neighbour(w, h, x, y, radius, [&](std::size_t j) {
         for (int half = 0; half < 2; ++half)
-            if (rel_var[half][j] == rel_var[half][j]) pool.push_back(std::log(rel_var[half][j]));
+            if (rv[half][j] == rv[half][j]) p[count++] = std::log(rv[half][j]);
     });
     pooled_estimate e;
-    if (pool.size() < static_cast<std::size_t>(std::max(min_count, 1))) return e;
-    const double n = static_cast<double>(pool.size());
+    if (count < static_cast<std::size_t>(std::max(min_count, 1))) return e;
+    const double n = static_cast<double>(count);
     double med = 0, mad = 0;
-    median_and_mad(pool.data(), pool.size(), med, mad);
+    median_and_mad(p, count, med, mad);
     const double s = mad / 0.6744897501960817;
     // The sample relative variance of a skewed law is biased low: E[r^] ~ r (1 - r) for a
     // gamma law (skewness 2 sqrt(r N)); 1 + r undoes it to first order.
@@ -349,14 +361,16 @@ inline pooled_estimate pooled_relative_variance(const std::vector<float> (&rel_v
 // NaN when fewer than min_count neighbours have both halves usable.
 inline double neighbourhood_lower_level(const std::vector<double> (&level)[2], int w, int h, int x, int y,
                                         int radius, int min_count, std::vector<float>& pool) {
-    pool.clear();
+    float* p = pool_room(pool, radius);
+    const double *l0 = level[0].data(), *l1 = level[1].data();
+    std::size_t count = 0;
     for_each_neighbour(w, h, x, y, radius, [&](std::size_t j) {
-        const double a = level[0][j], b = level[1][j];
-        if (a == a && b == b) pool.push_back(static_cast<float>(std::min(a, b)));
+        const double a = l0[j], b = l1[j];
+        if (a == a && b == b) p[count++] = static_cast<float>(std::min(a, b));
     });
-    if (pool.size() < static_cast<std::size_t>(std::max(min_count, 1))) return std::numeric_limits<double>::quiet_NaN();
+    if (count < static_cast<std::size_t>(std::max(min_count, 1))) return std::numeric_limits<double>::quiet_NaN();
     double med = 0, mad = 0;
-    median_and_mad(pool.data(), pool.size(), med, mad);
+    median_and_mad(p, count, med, mad);
     return med;
 }
 
@@ -366,6 +380,15 @@ inline double neighbourhood_lower_level(const std::vector<double> (&level)[2], i
 inline double pair_statistic(double hi, double lo, double r) noexcept {
     const double s = std::sqrt(hi) / std::sqrt(lo) - std::sqrt(lo) / std::sqrt(hi);
     return std::sqrt(0.5 / r) * s;
+}
+
+// Whether pair_statistic(hi, lo, r) may exceed z > 0: false only where it surely does not,
+// from t^2 = (hi - lo)^2 / (hi lo) / (2 r) without the square roots and divisions of the
+// exact form (every pixel's screen asks; the margin 1e-6 is far above either form's rounding,
+// at most ~1e-9 with r >= 1e-14).
+inline bool pair_may_exceed(double hi, double lo, double r, double z) noexcept {
+    const double d = hi - lo, zm = z - 1e-6;
+    return !(d * d / (hi * lo) * (0.5 / r) < zm * zm);
 }
 
 // t_df(q) with df rounded down to a grid of 64 steps per octave (from 1 to 2^34): a lower df
@@ -405,6 +428,17 @@ inline double paulson_z(double f, double d1, double d2) noexcept {
     return ((1.0 - a2) * c - (1.0 - a1)) / std::sqrt(a2 * c * c + a1);
 }
 
+// Whether paulson_z(f, d1, d2) may exceed z, f > 0: false only where it surely does not. z
+// grows with the cube root c where a1, a2 < 1 (dz/dc = ((1 - a2) a1 + a2 c (1 - a1)) / D^3),
+// and c <= (f + 2) / 3 (the mean of f, 1, 1 bounds their geometric mean): no cube root. The
+// margin 1e-6 is far above the rounding (~1e-8 where a1 is least).
+inline bool paulson_may_exceed(double f, double d1, double d2, double z) noexcept {
+    const double a1 = 2.0 / (9.0 * d1), a2 = 2.0 / (9.0 * d2);
+    if (!(a1 < 1.0 && a2 < 1.0)) return true;
+    const double c = (f + 2.0) / 3.0;
+    return !(((1.0 - a2) * c - (1.0 - a1)) / std::sqrt(a2 * c * c + a1) < z - 1e-6);
+}
+
 // P(F > f) for F(d1, d2), f > 0: I_y(d2/2, d1/2) with y = d2 / (d2 + d1 f), by the continued
 // fraction on whichever side converges (the small tails the test asks for come out directly).
 inline double f_upper_tail(double f, double d1, double d2) noexcept {
@@ -416,22 +450,39 @@ inline double f_upper_tail(double f, double d1, double d2) noexcept {
 }
 
 // Sum and count of the usable neighbours' levels in both halves (centre excluded), in scan
-// order: for the screen only, whose margin dwarfs any rounding.
+// order: for the screen only, whose margin dwarfs any rounding. Every pixel's screen runs it,
+// so it adds without branches (a usable level is > 0 (local_pixel) and the sum starts at +0:
+// adding +0 for an unusable one gives the same bits as skipping it), and away from the
+// frame's edges walks the window by `window` (window_offsets), without bounds.
 inline double neighbour_sum(const local_test_scratch& s, int w, int h, int x, int y, int radius,
-                            std::size_t& count) noexcept {
+                            const std::vector<std::ptrdiff_t>& window, std::size_t& count) noexcept {
+    const float* r0 = s.rel_var[0].data();
+    const float* r1 = s.rel_var[1].data();
+    const double* l0 = s.level[0].data();
+    const double* l1 = s.level[1].data();
     double sum = 0;
-    count = 0;
-    for (int yy = std::max(y - radius, 0); yy <= std::min(y + radius, h - 1); ++yy)
-        for (int xx = std::max(x - radius, 0); xx <= std::min(x + radius, w - 1); ++xx) {
-            if (xx == x && yy == y) continue;
-            const std::size_t j = static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(xx);
-            for (int half = 0; half < 2; ++half)
-                if (s.rel_var[half][j] == s.rel_var[half][j]) {
-                    sum += s.level[half][j];
-                    ++count;
-                }
-        }
+    std::size_t n = 0;
+    auto add = [&](std::size_t j) {
+        const bool u0 = r0[j] == r0[j], u1 = r1[j] == r1[j];
+        sum += u0 ? l0[j] : 0.0;
+        sum += u1 ? l1[j] : 0.0;
+        n += static_cast<std::size_t>(u0) + static_cast<std::size_t>(u1);
+    };
+    const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+    if (x >= radius && y >= radius && x + radius < w && y + radius < h)
+        for (const std::ptrdiff_t d : window) add(static_cast<std::size_t>(static_cast<std::ptrdiff_t>(i) + d));
+    else
+        for_each_neighbour(w, h, x, y, radius, add);
+    count = n;
     return sum;
+}
+
+// The offsets of the window's neighbours from its centre (row stride w), in scan order.
+inline void window_offsets(int w, int radius, std::vector<std::ptrdiff_t>& out) {
+    out.clear();
+    for (int dy = -radius; dy <= radius; ++dy)
+        for (int dx = -radius; dx <= radius; ++dx)
+            if (dx != 0 || dy != 0) out.push_back(static_cast<std::ptrdiff_t>(dy) * w + dx);
 }
 
 // The same levels into out, sorted, and their mean summed in that order: the same bits under
@@ -492,15 +543,18 @@ inline double local_score(const local_test_options& o, const local_levels_q& k, 
     // Screens, from r~ >= r_other (m <= 1 / r_other): the pair statistic with the other half's
     // own r bounds T from above and the threshold from below; for the spatial test, the
     // level ratio must exceed 1 and Paulson's z at m = 1 / r_other must come near z_q.
-    const double t_pair = pair_statistic(l_hi, l_lo, r_other);
-    const bool pair_may = t_pair > zq && t_pair > t_threshold(band, q, std::min(2.0 / r_other, 1e10));
+    const bool pair_may = pair_may_exceed(l_hi, l_lo, r_other, zq) && [&] {
+        const double t_pair = pair_statistic(l_hi, l_lo, r_other);
+        return t_pair > zq && t_pair > t_threshold(band, q, std::min(2.0 / r_other, 1e10));
+    }();
     double mu = 0;
     bool spatial_may = false;
     if (o.spatial) {
         std::size_t count = 0;
-        const double sum = neighbour_sum(s, w, h, x, y, o.radius, count);
+        const double sum = neighbour_sum(s, w, h, x, y, o.radius, band.window, count);
         const double m_max = 1.0 / r_other, n = static_cast<double>(count);
         spatial_may = count >= static_cast<std::size_t>(o.min_neighbours) && sum > 0 && l_hi * n > sum &&
+                      paulson_may_exceed(l_hi * n / sum, 2.0 * m_max, 2.0 * n * m_max, zq - 1.0) &&
                       paulson_z(l_hi * n / sum, 2.0 * m_max, 2.0 * n * m_max) > zq - 1.0;
         if (spatial_may) mu = neighbour_levels(s, w, h, x, y, o.radius, band.levels);
     }
@@ -526,17 +580,17 @@ inline double local_score(const local_test_options& o, const local_levels_q& k, 
     return score;
 }
 
-// The pair test's p-value (log) for half hi at (x, y), with r~ as local_score takes it, over
-// the levels of a finished local_test: for a one-half outlier the global test found. NaN
-// where the pixel is not tested (a half does not count, too few neighbours, hi not higher).
-inline double pair_log_p(const local_test_options& o, const local_test_scratch& s, int w, int h, int x, int y,
-                         int hi, std::vector<float>& pool) {
+// The pair test's p-value (log) for half hi at (x, y), with r~ as local_score takes it from
+// `pooled` (pooled_relative_variance at the pixel: one estimate serves both halves), over the
+// levels of a finished local_test: for a one-half outlier the global test found. NaN where the
+// pixel is not tested (a half does not count, too few neighbours, hi not higher).
+inline double pair_log_p(const local_test_scratch& s, int w, int x, int y, int hi,
+                         const pooled_estimate& pooled) noexcept {
     const double nan = std::numeric_limits<double>::quiet_NaN();
     const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
     if (s.rel_var[0].size() <= i || s.rel_var[1].size() <= i) return nan;
     const double r_other = s.rel_var[1 - hi][i], l_hi = s.level[hi][i], l_lo = s.level[1 - hi][i];
     if (!(r_other == r_other) || !(s.rel_var[hi][i] == s.rel_var[hi][i]) || !(l_hi > l_lo)) return nan;
-    const pooled_estimate pooled = pooled_relative_variance(s.rel_var, w, h, x, y, o.radius, o.min_neighbours, pool);
     if (!(pooled.nu == pooled.nu)) return nan;
     const double r = std::max(pooled.r, r_other);
     const double df = std::min(std::max(1.0 / (0.5 * r + 1.0 / pooled.nu), 1.0), 1e10);
@@ -553,6 +607,7 @@ inline void local_rows(const local_test_options& o, const local_levels_q& k, con
         f.log_p.clear();
     }
     found.tested = found.screened = found.spatial = 0;
+    window_offsets(w, o.radius, band.window);
     for (int y = y0; y < y1; ++y)
         for (int x = 0; x < w; ++x) {
             const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);

@@ -210,6 +210,7 @@ public:
     std::size_t scratch_bytes() const noexcept {
         std::size_t n = cache_->bytes() + local_scratch_.bytes() + local_result_.bytes() + calibration_.bytes() +
                         pairs_.capacity() * sizeof(std::uint32_t) + pair_log_p_.capacity() * sizeof(double) +
+                        visit_.capacity() * sizeof(std::uint64_t) +
                         frame_log_p_.capacity() * sizeof(double);
         for (const auto& h : halves_)
             n += h.sd.capacity() * sizeof(float) + h.label.capacity() +
@@ -274,6 +275,11 @@ private:
         std::vector<std::uint8_t> added;     // return_energy with a mask: light added here
         energy_scratch energy;
         reconstruct_scratch recon;
+    };
+
+    struct neighbourhood {             // neighbourhood_at
+        detail::pooled_estimate pooled;  // the local test's r~ at the pixel
+        double around = 0;               // the neighbourhood's level (noise_floor)
     };
 
     static constexpr int band_rows = 64;  // row bands of the full-frame passes: tasks for any pool
@@ -557,15 +563,15 @@ private:
     // heavier-tailed than any gamma, it kept 100x fireflies: relMSE 0.132 -> 0.197).
     template <class C, class V, class A>
     double excess_log_p(const half_buffer<C, V, A>* hb[2], int h, int x, int y, double cal,
-                        std::vector<float>& pool) const {
-        const int w = hb[0]->color.width(), hgt = hb[0]->color.height();
+                        const neighbourhood& nb) const {
         const double l_out = mean_colour(hb[h]->color, x, y), l_other = mean_colour(hb[1 - h]->color, x, y);
         const double v = reduced_variance(hb[1 - h]->variance, x, y);
-        const double v_other = noise_floor(x, y, w, hgt, v, l_other, l_out, cal, pool);
+        const double v_other = noise_floor(v, l_other, l_out, cal, nb);
         if (!exceeds_other_half(options_.highlight, l_out, l_other, v_other, cal)) return std::numeric_limits<double>::quiet_NaN();
         double log_p = normal_log_upper_tail(excess_z(l_out, l_other, v_other, cal));
         if (options_.local_test) {
-            const double pair = detail::pair_log_p(options_.local, local_scratch_, w, hgt, x, y, h, pool);
+            const int w = hb[0]->color.width();
+            const double pair = detail::pair_log_p(local_scratch_, w, x, y, h, nb.pooled);
             if (pair == pair) log_p = std::min(log_p, pair) + std::log(2.0);
         }
         return log_p;
@@ -579,13 +585,12 @@ private:
         const int w = a.color.width();
         pair_log_p_.assign(pairs_.size() * 2, std::numeric_limits<double>::quiet_NaN());
         if (!(options_.highlight.min_excess_z > 0)) return;
-        for_chunks(pairs_.size(), [&](std::size_t j0, std::size_t j1) {
-            std::vector<float> pool;
-            for (std::size_t j = j0; j < j1; ++j) {
-                const int x = static_cast<int>(pairs_[j] % static_cast<std::uint32_t>(w));
-                const int y = static_cast<int>(pairs_[j] / static_cast<std::uint32_t>(w));
-                for (int h = 0; h < 2; ++h) pair_log_p_[j * 2 + static_cast<std::size_t>(h)] = excess_log_p(hb, h, x, y, cal, pool);
-            }
+        for_entries_by_row(pairs_.data(), pairs_.size(), [&](std::size_t j, std::vector<float>& pool) {
+            const int x = static_cast<int>(pairs_[j] % static_cast<std::uint32_t>(w));
+            const int y = static_cast<int>(pairs_[j] / static_cast<std::uint32_t>(w));
+            const neighbourhood nb = neighbourhood_at(x, y, w, a.color.height(), pool);  // both halves'
+            for (int h = 0; h < 2; ++h)
+                pair_log_p_[j * 2 + static_cast<std::size_t>(h)] = excess_log_p(hb, h, x, y, cal, nb);
         });
     }
 
@@ -669,19 +674,16 @@ private:
                 return judges_confidence && is_highlight(options_.highlight, l, l, v, v, cal) ? highlight_bit : 0;
             }
             if (!(options_.highlight.min_excess_z > 0)) return 0;  // the paper: one half is a firefly
-            log_p = excess_log_p(hb, h, x, y, cal, pool);
+            log_p = excess_log_p(hb, h, x, y, cal, neighbourhood_at(x, y, w, hb[h]->color.height(), pool));
             return log_p == log_p ? 0 : consistent_bit;
         };
         for (int h = 0; h < 2; ++h) {
             const std::size_t n = rep.half[h].outliers - rep.half[h].local;  // local flags exceed
             std::vector<std::uint8_t>& bits = halves_[h].decision;         // the other half already
             bits.assign(n, 0);
-            for_chunks(n, [&](std::size_t j0, std::size_t j1) {
-                std::vector<float> pool;
-                for (std::size_t j = j0; j < j1; ++j) {
-                    halves_[h].log_p[j] = std::numeric_limits<double>::quiet_NaN();
-                    bits[j] = decide(h, halves_[h].order[j], pool, halves_[h].log_p[j]);
-                }
+            for_entries_by_row(halves_[h].order.data(), n, [&](std::size_t j, std::vector<float>& pool) {
+                halves_[h].log_p[j] = std::numeric_limits<double>::quiet_NaN();
+                bits[j] = decide(h, halves_[h].order[j], pool, halves_[h].log_p[j]);
             });
         }
         for (int h = 0; h < 2; ++h)
@@ -731,6 +733,21 @@ private:
         exec_.run((n + chunk - 1) / chunk, [&](std::size_t c) { f(c * chunk, std::min(n, (c + 1) * chunk)); });
     }
 
+    // f(j, pool) for the n entries of a list of pixels (list[j], distinct), in chunks as
+    // for_chunks, taken in row-major order of the pixels: f reads each pixel's neighbourhood,
+    // and the lists come in ESD order, scattered over the frame (by row, neighbours share cache
+    // lines). f(j) writes only entry j's results, so the order changes nothing.
+    template <class F>
+    void for_entries_by_row(const std::uint32_t* list, std::size_t n, F&& f) {
+        visit_.resize(n);
+        for (std::size_t j = 0; j < n; ++j) visit_[j] = (static_cast<std::uint64_t>(list[j]) << 32) | j;
+        std::sort(visit_.begin(), visit_.end());
+        for_chunks(n, [&](std::size_t k0, std::size_t k1) {
+            std::vector<float> pool;
+            for (std::size_t k = k0; k < k1; ++k) f(static_cast<std::size_t>(visit_[k] & 0xffffffffu), pool);
+        });
+    }
+
     // The other half's variance at (x, y), but never below what its neighbourhood's typical
     // relative variance (the median over both halves, the pixel left out; local_test.hpp)
     // predicts at the pixel's level: one pixel's variance from few heavy-tailed samples is
@@ -748,19 +765,30 @@ private:
     // times exp(0.545 sqrt(t) + t / 2) for the lower half's bias on a clean pixel: the median of
     // the smaller of two normal draws sits 0.545 sd below their mean (Phi(-0.545) = 1 -
     // 1 / sqrt 2), in log terms for relative variance t. Renderer units, like v.
-    double noise_floor(int x, int y, int w, int h, double v, double l_other, double l_out, double calibration,
-                       std::vector<float>& pool) const {
-        const local_test_scratch& ls = local_scratch_;
-        if (!options_.local_test || ls.rel_var[0].empty() || !(calibration > 0)) return v;
-        const detail::pooled_estimate e = detail::pooled_relative_variance(
-            ls.rel_var, w, h, x, y, options_.local.radius, options_.local.min_neighbours, pool);
-        if (!(e.nu == e.nu)) return v;  // too few neighbours: the pixel's own variance
-        const double t = e.typical;
-        const double around = detail::neighbourhood_lower_level(ls.level, w, h, x, y, options_.local.radius,
-                                                                (options_.local.min_neighbours + 1) / 2, pool) *
-                              std::exp(std::min(0.5449521356 * std::sqrt(t) + 0.5 * t, 700.0));
-        const double level = around > l_other ? std::min(around, std::max(l_out, l_other)) : l_other;
+    double noise_floor(double v, double l_other, double l_out, double calibration, const neighbourhood& nb) const {
+        // too few neighbours: the pixel's own variance
+        if (!(calibration > 0) || !(nb.pooled.nu == nb.pooled.nu)) return v;
+        const double t = nb.pooled.typical;
+        const double level = nb.around > l_other ? std::min(nb.around, std::max(l_out, l_other)) : l_other;
         return std::max(v, t * level * level / calibration);
+    }
+
+    // What the local test's levels say about the neighbourhood of (x, y), computed once for
+    // both halves' excess_log_p: the pooled relative variance (nu NaN: none, or no local test)
+    // and the neighbourhood's level with its bias undone (noise_floor).
+    neighbourhood neighbourhood_at(int x, int y, int w, int h, std::vector<float>& pool) const {
+        const local_test_scratch& ls = local_scratch_;
+        const std::size_t i = index(x, y, w);
+        neighbourhood nb;
+        if (!options_.local_test || ls.rel_var[0].size() <= i || ls.rel_var[1].size() <= i) return nb;
+        nb.pooled = detail::pooled_relative_variance(ls.rel_var, w, h, x, y, options_.local.radius,
+                                                     options_.local.min_neighbours, pool);
+        if (!(nb.pooled.nu == nb.pooled.nu)) return nb;
+        const double t = nb.pooled.typical;
+        nb.around = detail::neighbourhood_lower_level(ls.level, w, h, x, y, options_.local.radius,
+                                                      (options_.local.min_neighbours + 1) / 2, pool) *
+                    std::exp(std::min(0.5449521356 * std::sqrt(t) + 0.5 * t, 700.0));
+        return nb;
     }
 
     // The local test's flags join the outliers (after the global ones in each half's list).
@@ -974,6 +1002,7 @@ private:
     local_test_result local_result_;
     std::vector<double> frame_log_p_;  // the one-half fireflies' p-values (log), for the frame's level
     std::vector<double> pair_log_p_;   // per pair and half: the p-value (log) of its excess; NaN: none
+    std::vector<std::uint64_t> visit_;  // for_entries_by_row
     double frame_level_ = 0;           // log of the largest p-value the frame's decision keeps
 };
 
