@@ -357,6 +357,36 @@ TEST_CASE("K buffers: fireflies are found where most neighbours carry one too", 
     }
 }
 
+// Every pass (noise, find, refine_noise's second look, decide, energy return) gives the same
+// bytes for any executor: rows are judged from what earlier passes left, never from a row
+// another task is writing.
+TEST_CASE("K buffers: the same bytes for serial, threads(2) and threads(4)", "[buffers][parallel]") {
+    for (const char* name : {"dense10", "caustics"})
+        for (const int k : {4, 8}) {
+            const sim::buffers orig = sim::simulate_buffers(sim::named_scene(name, 96, 72, 3), k);
+            std::vector<std::vector<float>> serial;
+            for (const executor& e : {executor::serial(), executor::threads(2), executor::threads(4)}) {
+                frame_k f = from_sim(orig);
+                masks_k m(k, f.w, f.h);
+                cross_buffer_detector d({}, e);
+                const cross_buffer_report r = d.process(f.views(false).data(), k, m.views.data());
+                REQUIRE(r.ok());
+                std::vector<float> bytes;
+                for (int b = 0; b < k; ++b) {
+                    bytes.insert(bytes.end(), f.color[static_cast<std::size_t>(b)].begin(), f.color[static_cast<std::size_t>(b)].end());
+                    for (const std::uint8_t v : m.mem[static_cast<std::size_t>(b)]) bytes.push_back(v);
+                }
+                if (serial.empty()) {
+                    CHECK(r.fireflies > 0);
+                    serial.push_back(bytes);
+                } else {
+                    INFO(name << " k " << k);
+                    CHECK(std::memcmp(bytes.data(), serial[0].data(), bytes.size() * sizeof(float)) == 0);
+                }
+            }
+        }
+}
+
 TEST_CASE("K buffers: detect() on const views changes nothing and reports what process() does", "[buffers]") {
     for (const int k : {2, 5}) {
         const sim::buffers orig = sim::simulate_buffers(sim::named_scene("caustics", 64, 48, 4), k);
