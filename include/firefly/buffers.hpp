@@ -255,33 +255,6 @@ inline double median_of(double* v, int n) noexcept {
     return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
-// The pixel's own noise: the relative variance of one buffer's y, var(y) / mean(y)^2; from
-// the spread of its usable buffers, or (with variance) the median of Var[x] / x^2 / 9 (the
-// delta method on cbrt). NaN when unknown (fewer than 2 buffers, or a black pixel).
-inline double pixel_noise(const pixel_buffers& p, bool with_variance, int from = 0) noexcept {
-    const double nan = std::numeric_limits<double>::quiet_NaN();
-    if (with_variance) {
-        std::array<double, max_buffers> r{};
-        int m = 0;
-        for (int j = from; j < p.usable; ++j) {
-            const double v = p.rel_var[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])];
-            if (std::isfinite(v)) r[static_cast<std::size_t>(m++)] = v;
-        }
-        // Never below the spread: few-sample variances of skewed samples mostly sit low.
-        const double given = m == 0 ? nan : median_of(r.data(), m) / 9.0;
-        const double spread = pixel_noise(p, false, from);
-        return std::isnan(given) ? spread : std::isnan(spread) ? given : std::max(given, spread);
-    }
-    if (p.usable - from < 2) return nan;
-    const double mean = rest_mean(p, from);
-    double ss = 0;
-    for (int j = from; j < p.usable; ++j) {
-        const double d = p.ranked_y(j) - mean;
-        ss += d * d;
-    }
-    return mean != 0 ? ss / (p.usable - from - 1) / (mean * mean) : nan;
-}
-
 // The relative variance of y among order[i..usable) (R, mean given): their spread, or with
 // variance the median of their Var[x] / x^2 / 9. NaN when R cannot tell (fewer than 2).
 inline double rest_noise(const pixel_buffers& p, int i, double mean, bool with_variance) noexcept {
@@ -297,6 +270,19 @@ inline double rest_noise(const pixel_buffers& p, int i, double mean, bool with_v
     }
     if (with_variance) return m == 0 ? std::numeric_limits<double>::quiet_NaN() : median_of(r.data(), m) / 9.0;
     return n >= 2 && mean != 0 ? ss / (n - 1) / (mean * mean) : std::numeric_limits<double>::quiet_NaN();
+}
+
+// The pixel's own noise: the relative variance of one buffer's y, var(y) / mean(y)^2, over
+// its usable buffers from the from-th highest down (from > 0: without flagged ones); from
+// their spread, or (with variance) the larger of that and the median of Var[x] / x^2 / 9 (the
+// delta method on cbrt; few-sample variances of skewed samples mostly sit low). NaN when
+// unknown (fewer than 2 buffers, or a black pixel).
+inline double pixel_noise(const pixel_buffers& p, bool with_variance, int from = 0) noexcept {
+    const double mean = p.usable > from ? rest_mean(p, from) : 0.0;  // 0: no buffer, both NaN
+    const double spread = rest_noise(p, from, mean, false);
+    if (!with_variance) return spread;
+    const double given = rest_noise(p, from, mean, true);
+    return std::isnan(given) ? spread : std::isnan(spread) ? given : std::max(given, spread);
 }
 
 // Step i of the step-down: the i-th highest buffer against the mean of the ones below it, in
@@ -624,8 +610,11 @@ private:
                       const std::vector<row_counts>& counts) {
         if (!options_.refine_noise) return false;
         const int w = b[0].color.width();
+        const bool any = std::any_of(counts.begin(), counts.end(), [](const row_counts& c) {
+            return std::any_of(c.found.begin(), c.found.end(), [](const candidate& f) { return f.flagged > 0; });
+        });
+        if (!any) return false;
         refined_.assign(noise_.size(), 0);
-        std::vector<std::uint8_t> changed(counts.size(), 0);
         exec_.run(counts.size(), [&](std::size_t y) {
             detail::pixel_buffers p;
             p.k = k;
@@ -635,10 +624,9 @@ private:
                 const std::size_t i = index(f.x, static_cast<int>(y), w);
                 noise_[i] = detail::pixel_noise(p, with_var, f.flagged);
                 refined_[i] = 1;
-                changed[y] = 1;
             }
         });
-        return std::find(changed.begin(), changed.end(), 1) != changed.end();
+        return true;
     }
 
     // A median of relative variances scaled to a mean of chi-square(K - 1) / (K - 1)
