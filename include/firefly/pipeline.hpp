@@ -764,12 +764,23 @@ private:
     // local test's count of values; fireflies in one half of many neighbours do not lift it),
     // times exp(0.545 sqrt(t) + t / 2) for the lower half's bias on a clean pixel: the median of
     // the smaller of two normal draws sits 0.545 sd below their mean (Phi(-0.545) = 1 -
-    // 1 / sqrt 2), in log terms for relative variance t. Renderer units, like v.
+    // 1 / sqrt 2), in log terms for relative variance t. Where the neighbourhood is darker than
+    // the other half by more than three of that half's standard deviations (log terms), the
+    // pixel is detail (a line, a spot, an edge's bright side) and the neighbourhood says nothing
+    // of its level; the two halves are then its only estimates, and the level is their
+    // geometric mean (the null's: the common value of two draws). Taken at the other half's
+    // level there, a clean line pixel whose other half was a low draw "exceeded" it: frames
+    // without fireflies at 64 samples per half were changed 21 times in 80 (alpha 0.1), 10 now.
+    // A firefly on detail is still far above both (100x: the geometric mean is 10x the other
+    // half), and on smooth regions nothing changes (the Cycles renders within 0.5%). Renderer
+    // units, like v.
     double noise_floor(double v, double l_other, double l_out, double calibration, const neighbourhood& nb) const {
         // too few neighbours: the pixel's own variance
         if (!(calibration > 0) || !(nb.pooled.nu == nb.pooled.nu)) return v;
         const double t = nb.pooled.typical;
-        const double level = nb.around > l_other ? std::min(nb.around, std::max(l_out, l_other)) : l_other;
+        double level = nb.around > l_other ? std::min(nb.around, std::max(l_out, l_other)) : l_other;
+        if (l_other > 0 && l_out > l_other && nb.around * std::exp(3.0 * std::sqrt(t)) < l_other)
+            level = std::sqrt(l_out) * std::sqrt(l_other);  // detail (l_other > 0 here)
         return std::max(v, t * level * level / calibration);
     }
 
