@@ -60,22 +60,17 @@ double cross_half_estimate(const half_views<C, V>& own, const half_views<C, V>& 
     auto sums = [&](auto nc_const, auto nv_const, const half_views<C, V>& mine, auto&& can_read) {
         constexpr int NC = decltype(nc_const)::value, NV = decltype(nv_const)::value;
         const int w = own.color.width(), h = own.color.height();
-        const double wsum = kernel_sum<1, NC>(
-            kernel, x, y, w, h, 2 * nc, can_read,
+        return kernel_sum_1_2<NC, NV>(
+            kernel, x, y, w, h, 2 * nc, 2 * nv, can_read,
             [&](int xx, int yy, double* v) {
                 for (int c = 0; c < nc; ++c) v[c] = mine.color.load(xx, yy, c), v[nc + c] = other.color.load(xx, yy, c);
             },
-            s);
-        if (wsum > 0)
-            (void)kernel_sum<2, NV>(
-                kernel, x, y, w, h, 2 * nv, can_read,
-                [&](int xx, int yy, double* v) {
-                    for (int c = 0; c < nv; ++c)
-                        v[c] = std::max(mine.variance.load(xx, yy, c), 0.0),
-                        v[nv + c] = std::max(other.variance.load(xx, yy, c), 0.0);
-                },
-                vs);
-        return wsum;
+            [&](int xx, int yy, double* v) {
+                for (int c = 0; c < nv; ++c)
+                    v[c] = std::max(mine.variance.load(xx, yy, c), 0.0),
+                    v[nv + c] = std::max(other.variance.load(xx, yy, c), 0.0);
+            },
+            s, vs);
     };
     auto sums_for = [&](const half_views<C, V>& mine, auto&& can_read) {
         using I0 = std::integral_constant<int, 0>;

@@ -60,6 +60,17 @@ private:
     double sigma_ = 0;
 };
 
+// acc[c] += wk * (the class's tree of pair sums of v[j][c]) for c < n: one class's share.
+template <int Cap>
+inline void add_class(const kernel_class& k, double wk, const double (&v)[8][Cap], int n, double* acc) {
+    if (k.count == 8) {
+        for (int c = 0; c < n; ++c)
+            acc[c] += wk * (((v[0][c] + v[1][c]) + (v[2][c] + v[3][c])) + ((v[4][c] + v[5][c]) + (v[6][c] + v[7][c])));
+    } else {
+        for (int c = 0; c < n; ++c) acc[c] += wk * ((v[0][c] + v[1][c]) + (v[2][c] + v[3][c]));
+    }
+}
+
 // Weighted sums over the neighbours of (x, y) in a w x h image that `readable(xx, yy)`
 // accepts: acc[c] += weight^Power * v(c) for c < NC channels, where load(xx, yy, v) fills
 // v[0..NC). Returns the sum of weight^Power over the neighbours read (0: none). Unreadable
@@ -84,12 +95,39 @@ double kernel_sum(const gaussian_kernel& kernel, int x, int y, int w, int h, int
         if (used == 0) continue;
         const double wk = Power == 1 ? k.weight : k.weight * k.weight;
         wsum += wk * used;
-        if (k.count == 8) {
-            for (int c = 0; c < n; ++c)
-                acc[c] += wk * (((v[0][c] + v[1][c]) + (v[2][c] + v[3][c])) + ((v[4][c] + v[5][c]) + (v[6][c] + v[7][c])));
-        } else {
-            for (int c = 0; c < n; ++c) acc[c] += wk * ((v[0][c] + v[1][c]) + (v[2][c] + v[3][c]));
+        add_class(k, wk, v, n, acc);
+    }
+    return wsum;
+}
+
+// kernel_sum<1, NA> into acc_a and kernel_sum<2, NB> into acc_b over the same neighbours in one
+// pass (readable asked once a neighbour): the same sums, bit for bit. Returns the sum of the
+// weights (0: no neighbour read, and neither acc touched).
+template <int NA, int NB, class Readable, class LoadA, class LoadB>
+double kernel_sum_1_2(const gaussian_kernel& kernel, int x, int y, int w, int h, int na, int nb, Readable&& readable,
+                      LoadA&& load_a, LoadB&& load_b, double* acc_a, double* acc_b) {
+    constexpr int cap_a = NA > 0 ? NA : 32, cap_b = NB > 0 ? NB : 32;
+    const int n_a = NA > 0 ? NA : na, n_b = NB > 0 ? NB : nb;
+    double wsum = 0.0;
+    double va[8][cap_a], vb[8][cap_b];
+    for (const kernel_class& k : kernel.classes()) {
+        int used = 0;
+        for (int j = 0; j < k.count; ++j) {
+            const int xx = x + k.dx[j], yy = y + k.dy[j];
+            const bool ok = xx >= 0 && yy >= 0 && xx < w && yy < h && readable(xx, yy);
+            used += ok;
+            if (ok) {
+                load_a(xx, yy, va[j]);
+                load_b(xx, yy, vb[j]);
+            } else {
+                for (int c = 0; c < n_a; ++c) va[j][c] = 0.0;
+                for (int c = 0; c < n_b; ++c) vb[j][c] = 0.0;
+            }
         }
+        if (used == 0) continue;
+        wsum += k.weight * used;
+        add_class(k, k.weight, va, n_a, acc_a);
+        add_class(k, k.weight * k.weight, vb, n_b, acc_b);
     }
     return wsum;
 }
