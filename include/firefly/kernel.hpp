@@ -72,37 +72,11 @@ inline void add_class(const kernel_class& k, double wk, const double (&v)[8][Cap
 }
 
 // Weighted sums over the neighbours of (x, y) in a w x h image that `readable(xx, yy)`
-// accepts: acc[c] += weight^Power * v(c) for c < NC channels, where load(xx, yy, v) fills
-// v[0..NC). Returns the sum of weight^Power over the neighbours read (0: none). Unreadable
-// and outside neighbours contribute 0 to their place in the tree, so the sum is flip-exact.
-template <int Power, int NC, class Readable, class Load>
-double kernel_sum(const gaussian_kernel& kernel, int x, int y, int w, int h, int nchan, Readable&& readable,
-                  Load&& load, double* acc) {
-    constexpr int cap = NC > 0 ? NC : 32;
-    const int n = NC > 0 ? NC : nchan;
-    double wsum = 0.0;
-    double v[8][cap];
-    for (const kernel_class& k : kernel.classes()) {
-        int used = 0;
-        for (int j = 0; j < k.count; ++j) {
-            const int xx = x + k.dx[j], yy = y + k.dy[j];
-            const bool ok = xx >= 0 && yy >= 0 && xx < w && yy < h && readable(xx, yy);
-            used += ok;
-            if (ok) load(xx, yy, v[j]);
-            else
-                for (int c = 0; c < n; ++c) v[j][c] = 0.0;
-        }
-        if (used == 0) continue;
-        const double wk = Power == 1 ? k.weight : k.weight * k.weight;
-        wsum += wk * used;
-        add_class(k, wk, v, n, acc);
-    }
-    return wsum;
-}
-
-// kernel_sum<1, NA> into acc_a and kernel_sum<2, NB> into acc_b over the same neighbours in one
-// pass (readable asked once a neighbour): the same sums, bit for bit. Returns the sum of the
-// weights (0: no neighbour read, and neither acc touched).
+// accepts, two at once (readable asked once a neighbour): acc_a[c] += weight * a(c) for c < NA
+// channels and acc_b[c] += weight^2 * b(c) for c < NB, where load_a(xx, yy, v) fills v[0..NA)
+// (NA, NB = 0: na, nb at run time). Returns the sum of the weights of the neighbours read (0:
+// none, and neither acc touched). Unreadable and outside neighbours contribute 0 to their
+// place in the tree, so the sums are flip-exact.
 template <int NA, int NB, class Readable, class LoadA, class LoadB>
 double kernel_sum_1_2(const gaussian_kernel& kernel, int x, int y, int w, int h, int na, int nb, Readable&& readable,
                       LoadA&& load_a, LoadB&& load_b, double* acc_a, double* acc_b) {
@@ -130,6 +104,13 @@ double kernel_sum_1_2(const gaussian_kernel& kernel, int x, int y, int w, int h,
         add_class(k, k.weight * k.weight, vb, n_b, acc_b);
     }
     return wsum;
+}
+
+// kernel_sum_1_2's first sum alone.
+template <int NC, class Readable, class Load>
+double kernel_sum(const gaussian_kernel& kernel, int x, int y, int w, int h, int nchan, Readable&& readable,
+                  Load&& load, double* acc) {
+    return kernel_sum_1_2<NC, 0>(kernel, x, y, w, h, nchan, 0, readable, load, [](int, int, double*) {}, acc, nullptr);
 }
 
 }  // namespace firefly::detail

@@ -256,7 +256,7 @@ private:
         const std::size_t p = s_.list_[e];
         const int x = static_cast<int>(p % static_cast<std::size_t>(w_)), y = static_cast<int>(p / static_cast<std::size_t>(w_));
         double acc[16] = {};
-        const double wsum = kernel_sum<1, NC>(
+        const double wsum = kernel_sum<NC>(
             s_.kernel_, x, y, w_, h_, nch_, [this](int xx, int yy) { return readable(xx, yy); },
             [this](int xx, int yy, double* v) {
                 for (int c = 0; c < (NC > 0 ? NC : nch_); ++c) v[c] = load(xx, yy, c);
