@@ -80,6 +80,7 @@
 #include <cstdint>
 #include <limits>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "image_view.hpp"
@@ -190,12 +191,15 @@ namespace detail {
 // rounding, so a smaller relative sd is not information (and m stays finite).
 inline constexpr double min_relative_variance = 1e-14;
 
-// Level (mean colour) and relative variance of one pixel; false when it does not count.
-template <class C, class V>
-inline bool local_pixel(const C* pc, std::ptrdiff_t cs, const V* pv, std::ptrdiff_t vs, int nc, bool one_var,
+// Level (mean colour) and relative variance of one pixel; false when it does not count. NC > 0:
+// the channel count known at compile time (the loop unrolled; the same operations in the same
+// order as for nc = NC).
+template <int NC = 0, class C, class V>
+inline bool local_pixel(const C* pc, std::ptrdiff_t cs, const V* pv, std::ptrdiff_t vs, int nc_given, bool one_var,
                         double scale, double& level, float& rel_var) noexcept {
     using ctraits = channel_traits<std::remove_cv_t<C>>;
     using vtraits = channel_traits<std::remove_cv_t<V>>;
+    const int nc = NC > 0 ? NC : nc_given;
     double sum = 0, sd = 0, fin = 0;
     bool black = true;
     for (int c = 0; c < nc; ++c) {
@@ -219,25 +223,52 @@ inline bool local_pixel(const C* pc, std::ptrdiff_t cs, const V* pv, std::ptrdif
     return true;
 }
 
-// Level and relative variance of every pixel of one half (NaN where unusable).
-template <class C, class V, class A>
-void local_levels(const local_half<C, V, A>& h, double scale, std::vector<double>& level,
-                  std::vector<float>& rel_var) {
-    const int w = h.color.width(), ht = h.color.height();
+// Level and relative variance of the pixels of row y of one half (NaN where unusable); NC as
+// for local_pixel.
+template <int NC, class C, class V, class A>
+void local_levels_row(const local_half<C, V, A>& h, double scale, int y, const float* fc, const float* fv,
+                      double* level, float* rel_var) noexcept {
+    const int w = h.color.width();
     const int nc = colour_channels(h.color.channels());
     const bool one_var = h.variance.channels() == 1;
-    level.resize(h.color.pixel_count());
-    rel_var.resize(h.color.pixel_count());
     const strided<const C> col(h.color);
     const strided<const V> var(h.variance);
     const strided<const A> al(h.alpha);
     using atraits = channel_traits<std::remove_cv_t<A>>;
     const auto valid = static_cast<std::uint8_t>(pixel_class::valid);
+    const int cc = h.color.channels(), vc = h.variance.channels();
+    const std::size_t row = static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
+    for (int x = 0; x < w; ++x) {
+        const std::size_t i = row + static_cast<std::size_t>(x);
+        bool counts = fc ? local_pixel<NC>(fc + x * cc, 1, fv + x * vc, 1, nc, one_var, scale, level[x], rel_var[x])
+                         : local_pixel<NC>(col.p + y * col.y + x * col.x, col.c, var.p + y * var.y + x * var.x,
+                                           var.c, nc, one_var, scale, level[x], rel_var[x]);
+        if (h.label) {
+            counts &= (h.label[i] & pixel_class_bits) == valid;
+        } else if (!h.alpha.empty()) {
+            const double a = atraits::load(al.p[y * al.y + x * al.x]);
+            counts &= a > 0 && std::isfinite(a);
+        }
+        if (!counts) {
+            level[x] = std::numeric_limits<double>::quiet_NaN();
+            rel_var[x] = std::numeric_limits<float>::quiet_NaN();
+        }
+    }
+}
+
+// Level and relative variance of every pixel of one half (NaN where unusable).
+template <class C, class V, class A>
+void local_levels(const local_half<C, V, A>& h, double scale, std::vector<double>& level,
+                  std::vector<float>& rel_var) {
+    const int w = h.color.width(), ht = h.color.height();
+    level.resize(h.color.pixel_count());
+    rel_var.resize(h.color.pixel_count());
     // Packed rows of a converting type (a renderer's half) are read as float rows, converted
     // in bulk: the same values as loading one by one.
     constexpr bool convert = (float_rows_v<C> && float_rows_v<V>) &&
                              !(std::is_same_v<std::remove_cv_t<C>, float> && std::is_same_v<std::remove_cv_t<V>, float>);
     const bool rows = convert && h.color.is_packed() && h.variance.is_packed();
+    const bool rgb = colour_channels(h.color.channels()) == 3;  // the common case, unrolled
     std::vector<float> crow, vrow;
     for (int y = 0; y < ht; ++y) {
         const float* fc = nullptr;
@@ -248,37 +279,66 @@ void local_levels(const local_half<C, V, A>& h, double scale, std::vector<double
                 fv = float_row(h.variance, y, vrow);
             }
         }
-        const int cc = h.color.channels(), vc = h.variance.channels();
-        for (int x = 0; x < w; ++x) {
-            const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
-            bool counts = rows ? local_pixel(fc + x * cc, 1, fv + x * vc, 1, nc, one_var, scale, level[i], rel_var[i])
-                               : local_pixel(col.p + y * col.y + x * col.x, col.c, var.p + y * var.y + x * var.x,
-                                             var.c, nc, one_var, scale, level[i], rel_var[i]);
-            if (h.label) {
-                counts &= (h.label[i] & pixel_class_bits) == valid;
-            } else if (!h.alpha.empty()) {
-                const double a = atraits::load(al.p[y * al.y + x * al.x]);
-                counts &= a > 0 && std::isfinite(a);
-            }
-            if (!counts) {
-                level[i] = std::numeric_limits<double>::quiet_NaN();
-                rel_var[i] = std::numeric_limits<float>::quiet_NaN();
-            }
-        }
+        const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
+        if (rgb)
+            local_levels_row<3>(h, scale, y, fc, fv, level.data() + i, rel_var.data() + i);
+        else
+            local_levels_row<0>(h, scale, y, fc, fv, level.data() + i, rel_var.data() + i);
     }
 }
 
-// Median and median absolute deviation of p[0..n) (n >= 1, at most a few dozen values),
-// reordering p; the mean of the two middle values when n is even. Insertion sort, then the
-// deviations, which run outwards from the median in two sorted sequences, are merged up to
-// the middle (for these sizes several times faster than two selections).
-inline void median_and_mad(float* p, std::size_t n, double& med, double& mad) noexcept {
+// Batcher's odd-even merge sort of 16 values: 63 compare-exchanges (checked on all 2^16 0-1
+// inputs), branch-free, where insertion sort mispredicts about once per value.
+inline constexpr unsigned char sort16_network[63][2] = {
+    {0, 1}, {2, 3}, {0, 2}, {1, 3}, {1, 2}, {4, 5}, {6, 7}, {4, 6},
+    {5, 7}, {5, 6}, {0, 4}, {2, 6}, {2, 4}, {1, 5}, {3, 7}, {3, 5},
+    {1, 2}, {3, 4}, {5, 6}, {8, 9}, {10, 11}, {8, 10}, {9, 11}, {9, 10},
+    {12, 13}, {14, 15}, {12, 14}, {13, 15}, {13, 14}, {8, 12}, {10, 14}, {10, 12},
+    {9, 13}, {11, 15}, {11, 13}, {9, 10}, {11, 12}, {13, 14}, {0, 8}, {4, 12},
+    {4, 8}, {2, 10}, {6, 14}, {6, 10}, {2, 4}, {6, 8}, {10, 12}, {1, 9},
+    {5, 13}, {5, 9}, {3, 11}, {7, 15}, {7, 11}, {3, 5}, {7, 9}, {11, 13},
+    {1, 2}, {3, 4}, {5, 6}, {7, 8}, {9, 10}, {11, 12}, {13, 14},
+};
+
+// a <= b after: min and max, one instruction each and no branch where the machine has them.
+// Equal values come out as two copies of a: the same bits, but for zeros of both signs.
+template <class T>
+inline void compare_exchange(T& a, T& b) noexcept {
+    const T lo = std::min(a, b), hi = std::max(a, b);
+    a = lo;
+    b = hi;
+}
+
+template <class T, std::size_t... I>
+inline void sort16(T* v, std::index_sequence<I...>) noexcept {
+    (compare_exchange(v[sort16_network[I][0]], v[sort16_network[I][1]]), ...);
+}
+
+// Sorts p[0..n) ascending, no NaN and no -0 among them: the same values as any sort. Up to 16
+// values (a radius-1 window's two halves) through the network, padded with +Inf.
+template <class T>
+inline void sort_small(T* p, std::size_t n) noexcept {
+    if (n <= 16) {
+        T v[16];
+        for (std::size_t i = 0; i < 16; ++i) v[i] = i < n ? p[i] : std::numeric_limits<T>::infinity();
+        sort16(v, std::make_index_sequence<63>{});
+        for (std::size_t i = 0; i < n; ++i) p[i] = v[i];
+        return;
+    }
     for (std::size_t i = 1; i < n; ++i) {
-        const float v = p[i];
+        const T v = p[i];
         std::size_t j = i;
         for (; j > 0 && p[j - 1] > v; --j) p[j] = p[j - 1];
         p[j] = v;
     }
+}
+
+// Median and median absolute deviation of p[0..n) (n >= 1, at most a few dozen values),
+// reordering p; the mean of the two middle values when n is even. Sorted (sort_small), then the
+// deviations, which run outwards from the median in two sorted sequences, are merged up to
+// the middle (for these sizes several times faster than two selections).
+inline void median_and_mad(float* p, std::size_t n, double& med, double& mad) noexcept {
+    sort_small(p, n);
     const std::size_t k = n / 2;
     med = n % 2 ? static_cast<double>(p[k]) : 0.5 * (static_cast<double>(p[k - 1]) + p[k]);
     std::size_t right = static_cast<std::size_t>(
@@ -497,7 +557,7 @@ inline double neighbour_levels(const local_test_scratch& s, int w, int h, int x,
             for (int half = 0; half < 2; ++half)
                 if (s.rel_var[half][j] == s.rel_var[half][j]) out.push_back(s.level[half][j]);
         }
-    std::sort(out.begin(), out.end());
+    sort_small(out.data(), out.size());
     double sum = 0;
     for (const double l : out) sum += l;
     return out.empty() ? 0.0 : sum / static_cast<double>(out.size());
