@@ -83,6 +83,10 @@
 #include <utility>
 #include <vector>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include "image_view.hpp"
 #include "parallel.hpp"
 #include "stddev.hpp"
@@ -227,6 +231,44 @@ inline bool local_pixel(const C* pc, std::ptrdiff_t cs, const V* pv, std::ptrdif
     return true;
 }
 
+#if defined(__SSE2__)
+// local_pixel for two three-channel pixels (colour at c0 and c1, variance at v0 and v1) in
+// the two lanes of SSE2 registers: each lane takes local_pixel's operations in its order
+// (max(0, var) keeps var where it is NaN or -0, as std::max(var, 0.0) does), so the same
+// bits. The pass is bound by its divisions and square roots, here two at a time.
+template <class C, class V>
+inline void local_pixel_pair(const C* c0, const C* c1, std::ptrdiff_t cs, const V* v0, const V* v1,
+                             std::ptrdiff_t vs, double scale, double* level, float* rel_var, bool* counts) noexcept {
+    using ctraits = channel_traits<std::remove_cv_t<C>>;
+    using vtraits = channel_traits<std::remove_cv_t<V>>;
+    const __m128d zero = _mm_setzero_pd(), three = _mm_set1_pd(3.0), sc = _mm_set1_pd(scale);
+    __m128d sum = zero, sd = zero, fin = zero, black = _mm_cmpeq_pd(zero, zero);
+    for (int c = 0; c < 3; ++c) {
+        const __m128d v = _mm_set_pd(ctraits::load(c1[c * cs]), ctraits::load(c0[c * cs]));
+        const __m128d var = _mm_set_pd(vtraits::load(v1[c * vs]), vtraits::load(v0[c * vs]));
+        fin = _mm_add_pd(fin, _mm_add_pd(_mm_sub_pd(v, v), _mm_sub_pd(var, var)));
+        black = _mm_and_pd(black, _mm_cmpeq_pd(v, zero));
+        sum = _mm_add_pd(sum, v);
+        sd = _mm_add_pd(sd, _mm_sqrt_pd(_mm_mul_pd(_mm_max_pd(zero, var), sc)));
+    }
+    const __m128d lv = _mm_div_pd(sum, three);
+    double rel[2];
+    _mm_storeu_pd(level, lv);
+    _mm_storeu_pd(rel, _mm_div_pd(_mm_div_pd(sd, three), lv));
+    const int usable = _mm_movemask_pd(_mm_andnot_pd(black, _mm_cmpeq_pd(fin, zero)));
+    for (int k = 0; k < 2; ++k) {
+        counts[k] = (usable >> k) & 1;
+        if (!counts[k]) continue;
+        if (!(level[k] > 0) || !std::isfinite(level[k])) {
+            rel_var[k] = std::numeric_limits<float>::quiet_NaN();
+            continue;
+        }
+        const double r = std::max(rel[k] * rel[k], min_relative_variance);
+        rel_var[k] = static_cast<float>(std::min(r, static_cast<double>(FLT_MAX)));
+    }
+}
+#endif
+
 // Level and relative variance of the pixels of row y of one half (NaN where unusable); NC as
 // for local_pixel.
 template <int NC, class C, class V, class A>
@@ -242,11 +284,8 @@ void local_levels_row(const local_half<C, V, A>& h, double scale, int y, const f
     const auto valid = static_cast<std::uint8_t>(pixel_class::valid);
     const int cc = h.color.channels(), vc = h.variance.channels();
     const std::size_t row = static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
-    for (int x = 0; x < w; ++x) {
+    auto finish = [&](int x, bool counts) {
         const std::size_t i = row + static_cast<std::size_t>(x);
-        bool counts = fc ? local_pixel<NC>(fc + x * cc, 1, fv + x * vc, 1, nc, one_var, scale, level[x], rel_var[x])
-                         : local_pixel<NC>(col.p + y * col.y + x * col.x, col.c, var.p + y * var.y + x * var.x,
-                                           var.c, nc, one_var, scale, level[x], rel_var[x]);
         if (h.label) {
             counts &= (h.label[i] & pixel_class_bits) == valid;
         } else if (!h.alpha.empty()) {
@@ -257,6 +296,30 @@ void local_levels_row(const local_half<C, V, A>& h, double scale, int y, const f
             level[x] = std::numeric_limits<double>::quiet_NaN();
             rel_var[x] = std::numeric_limits<float>::quiet_NaN();
         }
+    };
+    int x = 0;
+#if defined(__SSE2__)
+    if constexpr (NC == 3) {
+        for (; x + 1 < w; x += 2) {
+            bool counts[2];
+            if (fc)
+                local_pixel_pair(fc + x * cc, fc + (x + 1) * cc, 1, fv + x * vc, fv + (x + 1) * vc, one_var ? 0 : 1,
+                                 scale, level + x, rel_var + x, counts);
+            else
+                local_pixel_pair(col.p + y * col.y + x * col.x, col.p + y * col.y + (x + 1) * col.x, col.c,
+                                 var.p + y * var.y + x * var.x, var.p + y * var.y + (x + 1) * var.x,
+                                 one_var ? 0 : var.c, scale, level + x, rel_var + x, counts);
+            finish(x, counts[0]);
+            finish(x + 1, counts[1]);
+        }
+    }
+#endif
+    for (; x < w; ++x) {
+        const bool counts =
+            fc ? local_pixel<NC>(fc + x * cc, 1, fv + x * vc, 1, nc, one_var, scale, level[x], rel_var[x])
+               : local_pixel<NC>(col.p + y * col.y + x * col.x, col.c, var.p + y * var.y + x * var.x, var.c, nc,
+                                 one_var, scale, level[x], rel_var[x]);
+        finish(x, counts);
     }
 }
 
