@@ -518,6 +518,13 @@ inline bool pair_may_exceed(double hi, double lo, double r, double z) noexcept {
     return !(d * d / (hi * lo) * (0.5 / r) < zm * zm);
 }
 
+// Whether pair_may_exceed(hi, lo, r, z) is surely false (hi, lo, r, z > 0), multiplied
+// through: no division. Its rounding (~1e-15 relatively) is far below the margin 1e-9.
+inline bool pair_surely_below(double hi, double lo, double r, double z) noexcept {
+    const double d = hi - lo, zm = z - 1e-6;
+    return 0.5 * d * d < zm * zm * (hi * lo) * r * (1.0 - 1e-9);
+}
+
 // t_df(q) with df rounded down to a grid of 64 steps per octave (from 1 to 2^34): a lower df
 // gives a higher threshold, so the rounding only makes the test a little stricter (df at most
 // 1.1% low), and the Newton iterations run once per grid step and sequence of frames.
@@ -649,15 +656,21 @@ inline void window_columns(const local_test_scratch& s, int w, int y, local_band
 
 // Whether the spatial screen in local_score may pass, from a window sum `approx` of the same
 // count usable levels in another order: false only where it surely fails. The levels are
-// positive, so the two sums differ by less than 1e-12 relatively (16 values), and the margin
-// 1e-6 on z is far above what that and the rounding of paulson_may_exceed move it
-// (~1e-8 where a1 is least).
-inline bool spatial_screen_may(double l_hi, double approx, std::size_t count, double m_max, double zq,
+// positive, so the two sums differ by less than 1e-12 relatively (16 values). Paulson's z at
+// m = 1 / r (a1 = r / 9, a2 = a1 / n) rises with c = (f + 2) / 3 (paulson_may_exceed); at c
+// = p / (3 approx), multiplied through by 3 n approx, it is M / sqrt(n a1 (p^2 + 9 n approx^2)):
+// no division. The margin 1e-4 on z is far above what the sums' difference, this form's
+// rounding and the exact screen's (~1e-8 where a1 is least) move it.
+inline bool spatial_screen_may(double l_hi, double approx, std::size_t count, double r_other, double zq,
                                int min_neighbours) noexcept {
     const double n = static_cast<double>(count);
     if (count < static_cast<std::size_t>(min_neighbours) || !(approx > 0)) return false;
     if (!(l_hi * n > approx * (1.0 - 1e-12))) return false;
-    return paulson_may_exceed(l_hi * n / approx * (1.0 + 1e-12), 2.0 * m_max, 2.0 * n * m_max, zq - 1.0 - 1e-6);
+    const double z = zq - 1.0 - 1e-4, a1 = r_other * (1.0 / 9.0);
+    if (!(z > 0 && a1 < 0.5)) return true;  // z need not rise with c
+    const double p = l_hi * n * (1.0 + 1e-12) + 2.0 * approx;
+    const double m = (n - a1) * p - 3.0 * n * (1.0 - a1) * approx;
+    return m > 0 && m * m >= z * z * n * a1 * (p * p + 9.0 * n * approx * approx);
 }
 
 // The same levels into out, sorted, and their mean summed in that order: the same bits under
@@ -726,17 +739,17 @@ inline double local_score(const local_test_options& o, const local_levels_q& k, 
     // Screens, from r~ >= r_other (m <= 1 / r_other): the pair statistic with the other half's
     // own r bounds T from above and the threshold from below; for the spatial test, the
     // level ratio must exceed 1 and Paulson's z at m = 1 / r_other must come near z_q.
-    const bool pair_may = pair_may_exceed(l_hi, l_lo, r_other, zq) && [&] {
+    bool pair_may = !pair_surely_below(l_hi, l_lo, r_other, zq) && pair_may_exceed(l_hi, l_lo, r_other, zq);
+    if (pair_may) {
         const double t_pair = pair_statistic(l_hi, l_lo, r_other);
-        return t_pair > zq && t_pair > t_threshold(band, q, std::min(2.0 / r_other, 1e10));
-    }();
+        pair_may = t_pair > zq && t_pair > t_threshold(band, q, std::min(2.0 / r_other, 1e10));
+    }
     double mu = 0;
     bool spatial_may = false;
-    const double m_max = 1.0 / r_other;
-    if (o.spatial && (!fast.known || spatial_screen_may(l_hi, fast.sum, fast.count, m_max, zq, o.min_neighbours))) {
+    if (o.spatial && (!fast.known || spatial_screen_may(l_hi, fast.sum, fast.count, r_other, zq, o.min_neighbours))) {
         std::size_t count = 0;
         const double sum = neighbour_sum(s, w, h, x, y, o.radius, band.window, count);
-        const double n = static_cast<double>(count);
+        const double m_max = 1.0 / r_other, n = static_cast<double>(count);
         spatial_may = count >= static_cast<std::size_t>(o.min_neighbours) && sum > 0 && l_hi * n > sum &&
                       paulson_may_exceed(l_hi * n / sum, 2.0 * m_max, 2.0 * n * m_max, zq - 1.0) &&
                       paulson_z(l_hi * n / sum, 2.0 * m_max, 2.0 * n * m_max) > zq - 1.0;
