@@ -156,11 +156,16 @@ struct local_band_scratch {
     std::vector<std::ptrdiff_t> window;  // detail::window_offsets
     std::vector<double> column_sum[2];   // detail::window_columns: 3 rows, and the 2 outer rows
     std::vector<std::uint8_t> column_count[2];
+    std::vector<double> row_sum[3];      // detail::row_levels, rows y mod 3
+    std::vector<std::uint8_t> row_count[3];
     std::vector<double> thresholds;  // t_df(q) by df grid step (see detail::t_threshold)
     double thresholds_q = 0;
     local_test_result found;         // this band's flags and counts
     std::size_t bytes() const noexcept {
-        return (levels.capacity() + thresholds.capacity() + column_sum[0].capacity() + column_sum[1].capacity()) *
+        std::size_t rows = 0;
+        for (int t = 0; t < 3; ++t) rows += row_sum[t].capacity() * sizeof(double) + row_count[t].capacity();
+        return rows +
+               (levels.capacity() + thresholds.capacity() + column_sum[0].capacity() + column_sum[1].capacity()) *
                    sizeof(double) +
                column_count[0].capacity() + column_count[1].capacity() + pool.capacity() * sizeof(float) +
                window.capacity() * sizeof(std::ptrdiff_t) +
@@ -619,38 +624,53 @@ inline void window_offsets(int w, int radius, std::vector<std::ptrdiff_t>& out) 
             if (dx != 0 || dy != 0) out.push_back(static_cast<std::ptrdiff_t>(dy) * w + dx);
 }
 
-// Row y's window sums for the screen, radius 1 (rows y - 1 and y + 1 inside the frame): per
-// column x, the usable levels of both halves over the three rows (column_sum[0]) and over the
-// rows above and below (column_sum[1]), with their counts. Vectorizes, where neighbour_sum is
-// a chain of dependent additions; the window's sum at x is column_sum[0][x - 1] +
-// column_sum[1][x] + column_sum[0][x + 1], in another order than neighbour_sum's (within
-// 15 2^-53 of it, relatively: spatial_screen_may allows for that).
-inline void window_columns(const local_test_scratch& s, int w, int y, local_band_scratch& band) {
+// Row y's usable levels of both halves summed per pixel, and counted, into the ring slot
+// y mod 3 (window_columns reads three consecutive rows: each is summed once).
+inline void row_levels(const local_test_scratch& s, int w, int y, local_band_scratch& band) {
+    const std::size_t n = static_cast<std::size_t>(w), slot = static_cast<std::size_t>(y % 3);
+    band.row_sum[slot].resize(n);
+    band.row_count[slot].resize(n);
+    const std::size_t row = static_cast<std::size_t>(y) * n;
+    const float* r0 = s.rel_var[0].data() + row;
+    const float* r1 = s.rel_var[1].data() + row;
+    const double* l0 = s.level[0].data() + row;
+    const double* l1 = s.level[1].data() + row;
+    double* sum = band.row_sum[slot].data();
+    std::uint8_t* count = band.row_count[slot].data();
+    for (std::size_t x = 0; x < n; ++x) {
+        const bool u0 = r0[x] == r0[x], u1 = r1[x] == r1[x];
+        sum[x] = (u0 ? l0[x] : 0.0) + (u1 ? l1[x] : 0.0);
+        count[x] = static_cast<std::uint8_t>(u0 + u1);
+    }
+}
+
+// Row y's window sums for the screen, radius 1 (rows y - 1, y and y + 1 in row_levels' ring):
+// per column x, the usable levels of both halves over the three rows (column_sum[0]) and over
+// the rows above and below (column_sum[1]), with their counts. Vectorizes, where
+// neighbour_sum is a chain of dependent additions; the window's sum at x is
+// column_sum[0][x - 1] + column_sum[1][x] + column_sum[0][x + 1], in another order than
+// neighbour_sum's (within 15 2^-53 of it, relatively: spatial_screen_may allows for that).
+inline void window_columns(int w, int y, local_band_scratch& band) {
     const std::size_t n = static_cast<std::size_t>(w);
     for (int t = 0; t < 2; ++t) {
         band.column_sum[t].resize(n);
         band.column_count[t].resize(n);
     }
-    const float* r0 = s.rel_var[0].data();
-    const float* r1 = s.rel_var[1].data();
-    const double* l0 = s.level[0].data();
-    const double* l1 = s.level[1].data();
-    const std::size_t up = static_cast<std::size_t>(y - 1) * n, mid = up + n, down = mid + n;
+    const double* a = band.row_sum[(y + 2) % 3].data();  // row y - 1
+    const double* b = band.row_sum[y % 3].data();
+    const double* c = band.row_sum[(y + 1) % 3].data();
+    const std::uint8_t* na = band.row_count[(y + 2) % 3].data();
+    const std::uint8_t* nb = band.row_count[y % 3].data();
+    const std::uint8_t* nc = band.row_count[(y + 1) % 3].data();
     double* full = band.column_sum[0].data();
     double* outer = band.column_sum[1].data();
     std::uint8_t* full_n = band.column_count[0].data();
     std::uint8_t* outer_n = band.column_count[1].data();
     for (std::size_t x = 0; x < n; ++x) {
-        const bool a0 = r0[up + x] == r0[up + x], a1 = r1[up + x] == r1[up + x];
-        const bool b0 = r0[mid + x] == r0[mid + x], b1 = r1[mid + x] == r1[mid + x];
-        const bool c0 = r0[down + x] == r0[down + x], c1 = r1[down + x] == r1[down + x];
-        const double a = (a0 ? l0[up + x] : 0.0) + (a1 ? l1[up + x] : 0.0);
-        const double b = (b0 ? l0[mid + x] : 0.0) + (b1 ? l1[mid + x] : 0.0);
-        const double c = (c0 ? l0[down + x] : 0.0) + (c1 ? l1[down + x] : 0.0);
-        outer[x] = a + c;
-        full[x] = (a + c) + b;
-        outer_n[x] = static_cast<std::uint8_t>(a0 + a1 + c0 + c1);
-        full_n[x] = static_cast<std::uint8_t>(outer_n[x] + b0 + b1);
+        outer[x] = a[x] + c[x];
+        full[x] = (a[x] + c[x]) + b[x];
+        outer_n[x] = static_cast<std::uint8_t>(na[x] + nc[x]);
+        full_n[x] = static_cast<std::uint8_t>(na[x] + nc[x] + nb[x]);
     }
 }
 
@@ -805,9 +825,14 @@ inline void local_rows(const local_test_options& o, const local_levels_q& k, con
     }
     found.tested = found.screened = found.spatial = 0;
     window_offsets(w, o.radius, band.window);
+    int ready = -1;  // the last row in row_levels' ring
     for (int y = y0; y < y1; ++y) {
         const bool columns = o.spatial && o.radius == 1 && y >= 1 && y + 1 < h;
-        if (columns) window_columns(s, w, y, band);
+        if (columns) {
+            for (int r = std::max(ready + 1, y - 1); r <= y + 1; ++r) row_levels(s, w, r, band);
+            ready = y + 1;
+            window_columns(w, y, band);
+        }
         for (int x = 0; x < w; ++x) {
             const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
             const float ra = s.rel_var[0][i], rb = s.rel_var[1][i];
