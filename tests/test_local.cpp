@@ -6,6 +6,7 @@
 #include <cfloat>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <sstream>
 #include <string>
@@ -654,5 +655,46 @@ TEST_CASE("local test: the neighbourhood's lower level", "[local]") {
         CHECK(detail::neighbourhood_lower_level(level, w, h, 1, 1, 1, 2, pool) == 1.0);  // min(2, 1), min(4, 1)
         CHECK(std::isnan(detail::neighbourhood_lower_level(level, w, h, 1, 1, 1, 3, pool)));
         CHECK(std::isnan(detail::neighbourhood_lower_level(level, 1, 1, 0, 0, 1, 1, pool)));  // 1x1: none
+    }
+}
+
+TEST_CASE("local test: levels and relative variances match local_pixel bit for bit", "[local]") {
+    // Every special value local_pixel sorts out (NaN, Inf, -0, negative and zero variance,
+    // black, negative colour), in pairs of neighbours and at odd widths, for 3 and 1 variance
+    // channels: the row pass (two pixels at a time where it can) gives local_pixel's bits.
+    const float specials[] = {0.0f, -0.0f, 1.0f, -1.0f, 0.5f, 3e38f, 1e-40f, -2.5f,
+                              std::numeric_limits<float>::infinity(), std::numeric_limits<float>::quiet_NaN()};
+    test_rng rng(99);
+    for (const int w : {1, 2, 7, 16}) {
+        for (const int vch : {3, 1}) {
+            const int h = 9;
+            std::vector<float> col(static_cast<std::size_t>(w) * h * 3), var(static_cast<std::size_t>(w) * h * vch);
+            auto pick = [&]() {
+                const std::uint64_t r = rng.next();
+                return r % 3 == 0 ? specials[(r >> 8) % 10] : static_cast<float>((r >> 11) % 1000) / 100.0f;
+            };
+            for (float& v : col) v = pick();
+            for (float& v : var) v = pick();
+            local_half<float> half{*make_image_view(static_cast<const float*>(col.data()), w, h, 3),
+                                   *make_image_view(static_cast<const float*>(var.data()), w, h, vch)};
+            std::vector<double> level;
+            std::vector<float> rel_var;
+            detail::local_levels(half, 2.0, level, rel_var);
+            for (std::size_t i = 0; i < level.size(); ++i) {
+                double l = 0;
+                float r = std::numeric_limits<float>::quiet_NaN();
+                const bool counts = detail::local_pixel(&col[i * 3], 1, &var[i * vch], 1, 3, vch == 1, 2.0, l, r);
+                if (!counts) {
+                    CHECK(std::isnan(level[i]));
+                    CHECK(std::isnan(rel_var[i]));
+                    continue;
+                }
+                CHECK(std::memcmp(&l, &level[i], sizeof l) == 0);
+                if (std::isnan(r))
+                    CHECK(std::isnan(rel_var[i]));
+                else
+                    CHECK(std::memcmp(&r, &rel_var[i], sizeof r) == 0);
+            }
+        }
     }
 }

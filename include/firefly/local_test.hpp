@@ -80,7 +80,12 @@
 #include <cstdint>
 #include <limits>
 #include <type_traits>
+#include <utility>
 #include <vector>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "image_view.hpp"
 #include "parallel.hpp"
@@ -149,11 +154,20 @@ struct local_band_scratch {
     std::vector<float> pool;
     std::vector<double> levels;      // the neighbourhood's levels (spatial test)
     std::vector<std::ptrdiff_t> window;  // detail::window_offsets
+    std::vector<double> column_sum[2];   // detail::window_columns: 3 rows, and the 2 outer rows
+    std::vector<std::uint8_t> column_count[2];
+    std::vector<double> row_sum[3];      // detail::row_levels, rows y mod 3
+    std::vector<std::uint8_t> row_count[3];
     std::vector<double> thresholds;  // t_df(q) by df grid step (see detail::t_threshold)
     double thresholds_q = 0;
     local_test_result found;         // this band's flags and counts
     std::size_t bytes() const noexcept {
-        return (levels.capacity() + thresholds.capacity()) * sizeof(double) + pool.capacity() * sizeof(float) +
+        std::size_t rows = 0;
+        for (int t = 0; t < 3; ++t) rows += row_sum[t].capacity() * sizeof(double) + row_count[t].capacity();
+        return rows +
+               (levels.capacity() + thresholds.capacity() + column_sum[0].capacity() + column_sum[1].capacity()) *
+                   sizeof(double) +
+               column_count[0].capacity() + column_count[1].capacity() + pool.capacity() * sizeof(float) +
                window.capacity() * sizeof(std::ptrdiff_t) +
                (found.half[0].index.capacity() + found.half[1].index.capacity()) * 16;
     }
@@ -190,12 +204,15 @@ namespace detail {
 // rounding, so a smaller relative sd is not information (and m stays finite).
 inline constexpr double min_relative_variance = 1e-14;
 
-// Level (mean colour) and relative variance of one pixel; false when it does not count.
-template <class C, class V>
-inline bool local_pixel(const C* pc, std::ptrdiff_t cs, const V* pv, std::ptrdiff_t vs, int nc, bool one_var,
+// Level (mean colour) and relative variance of one pixel; false when it does not count. NC > 0:
+// the channel count known at compile time (the loop unrolled; the same operations in the same
+// order as for nc = NC).
+template <int NC = 0, class C, class V>
+inline bool local_pixel(const C* pc, std::ptrdiff_t cs, const V* pv, std::ptrdiff_t vs, int nc_given, bool one_var,
                         double scale, double& level, float& rel_var) noexcept {
     using ctraits = channel_traits<std::remove_cv_t<C>>;
     using vtraits = channel_traits<std::remove_cv_t<V>>;
+    const int nc = NC > 0 ? NC : nc_given;
     double sum = 0, sd = 0, fin = 0;
     bool black = true;
     for (int c = 0; c < nc; ++c) {
@@ -219,25 +236,111 @@ inline bool local_pixel(const C* pc, std::ptrdiff_t cs, const V* pv, std::ptrdif
     return true;
 }
 
-// Level and relative variance of every pixel of one half (NaN where unusable).
-template <class C, class V, class A>
-void local_levels(const local_half<C, V, A>& h, double scale, std::vector<double>& level,
-                  std::vector<float>& rel_var) {
-    const int w = h.color.width(), ht = h.color.height();
+#if defined(__SSE2__)
+// local_pixel for two three-channel pixels (colour at c0 and c1, variance at v0 and v1) in
+// the two lanes of SSE2 registers: each lane takes local_pixel's operations in its order
+// (max(0, var) keeps var where it is NaN or -0, as std::max(var, 0.0) does), so the same
+// bits. The pass is bound by its divisions and square roots, here two at a time.
+template <class C, class V>
+inline void local_pixel_pair(const C* c0, const C* c1, std::ptrdiff_t cs, const V* v0, const V* v1,
+                             std::ptrdiff_t vs, double scale, double* level, float* rel_var, bool* counts) noexcept {
+    using ctraits = channel_traits<std::remove_cv_t<C>>;
+    using vtraits = channel_traits<std::remove_cv_t<V>>;
+    const __m128d zero = _mm_setzero_pd(), three = _mm_set1_pd(3.0), sc = _mm_set1_pd(scale);
+    __m128d sum = zero, sd = zero, fin = zero, black = _mm_cmpeq_pd(zero, zero);
+    for (int c = 0; c < 3; ++c) {
+        const __m128d v = _mm_set_pd(ctraits::load(c1[c * cs]), ctraits::load(c0[c * cs]));
+        const __m128d var = _mm_set_pd(vtraits::load(v1[c * vs]), vtraits::load(v0[c * vs]));
+        fin = _mm_add_pd(fin, _mm_add_pd(_mm_sub_pd(v, v), _mm_sub_pd(var, var)));
+        black = _mm_and_pd(black, _mm_cmpeq_pd(v, zero));
+        sum = _mm_add_pd(sum, v);
+        sd = _mm_add_pd(sd, _mm_sqrt_pd(_mm_mul_pd(_mm_max_pd(zero, var), sc)));
+    }
+    const __m128d lv = _mm_div_pd(sum, three);
+    double rel[2];
+    _mm_storeu_pd(level, lv);
+    _mm_storeu_pd(rel, _mm_div_pd(_mm_div_pd(sd, three), lv));
+    const int usable = _mm_movemask_pd(_mm_andnot_pd(black, _mm_cmpeq_pd(fin, zero)));
+    for (int k = 0; k < 2; ++k) {
+        counts[k] = (usable >> k) & 1;
+        if (!counts[k]) continue;
+        if (!(level[k] > 0) || !std::isfinite(level[k])) {
+            rel_var[k] = std::numeric_limits<float>::quiet_NaN();
+            continue;
+        }
+        const double r = std::max(rel[k] * rel[k], min_relative_variance);
+        rel_var[k] = static_cast<float>(std::min(r, static_cast<double>(FLT_MAX)));
+    }
+}
+#endif
+
+// Level and relative variance of the pixels of row y of one half (NaN where unusable); NC as
+// for local_pixel.
+template <int NC, class C, class V, class A>
+void local_levels_row(const local_half<C, V, A>& h, double scale, int y, const float* fc, const float* fv,
+                      double* level, float* rel_var) noexcept {
+    const int w = h.color.width();
     const int nc = colour_channels(h.color.channels());
     const bool one_var = h.variance.channels() == 1;
-    level.resize(h.color.pixel_count());
-    rel_var.resize(h.color.pixel_count());
     const strided<const C> col(h.color);
     const strided<const V> var(h.variance);
     const strided<const A> al(h.alpha);
     using atraits = channel_traits<std::remove_cv_t<A>>;
     const auto valid = static_cast<std::uint8_t>(pixel_class::valid);
+    const int cc = h.color.channels(), vc = h.variance.channels();
+    const std::size_t row = static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
+    auto finish = [&](int x, bool counts) {
+        const std::size_t i = row + static_cast<std::size_t>(x);
+        if (h.label) {
+            counts &= (h.label[i] & pixel_class_bits) == valid;
+        } else if (!h.alpha.empty()) {
+            const double a = atraits::load(al.p[y * al.y + x * al.x]);
+            counts &= a > 0 && std::isfinite(a);
+        }
+        if (!counts) {
+            level[x] = std::numeric_limits<double>::quiet_NaN();
+            rel_var[x] = std::numeric_limits<float>::quiet_NaN();
+        }
+    };
+    int x = 0;
+#if defined(__SSE2__)
+    if constexpr (NC == 3) {
+        for (; x + 1 < w; x += 2) {
+            bool counts[2];
+            if (fc)
+                local_pixel_pair(fc + x * cc, fc + (x + 1) * cc, 1, fv + x * vc, fv + (x + 1) * vc, one_var ? 0 : 1,
+                                 scale, level + x, rel_var + x, counts);
+            else
+                local_pixel_pair(col.p + y * col.y + x * col.x, col.p + y * col.y + (x + 1) * col.x, col.c,
+                                 var.p + y * var.y + x * var.x, var.p + y * var.y + (x + 1) * var.x,
+                                 one_var ? 0 : var.c, scale, level + x, rel_var + x, counts);
+            finish(x, counts[0]);
+            finish(x + 1, counts[1]);
+        }
+    }
+#endif
+    for (; x < w; ++x) {
+        const bool counts =
+            fc ? local_pixel<NC>(fc + x * cc, 1, fv + x * vc, 1, nc, one_var, scale, level[x], rel_var[x])
+               : local_pixel<NC>(col.p + y * col.y + x * col.x, col.c, var.p + y * var.y + x * var.x, var.c, nc,
+                                 one_var, scale, level[x], rel_var[x]);
+        finish(x, counts);
+    }
+}
+
+// Level and relative variance of every pixel of one half (NaN where unusable).
+template <class C, class V, class A>
+void local_levels(const local_half<C, V, A>& h, double scale, std::vector<double>& level,
+                  std::vector<float>& rel_var) {
+    const int w = h.color.width(), ht = h.color.height();
+    level.resize(h.color.pixel_count());
+    rel_var.resize(h.color.pixel_count());
     // Packed rows of a converting type (a renderer's half) are read as float rows, converted
     // in bulk: the same values as loading one by one.
     constexpr bool convert = (float_rows_v<C> && float_rows_v<V>) &&
                              !(std::is_same_v<std::remove_cv_t<C>, float> && std::is_same_v<std::remove_cv_t<V>, float>);
     const bool rows = convert && h.color.is_packed() && h.variance.is_packed();
+    const bool rgb = colour_channels(h.color.channels()) == 3;  // the common case, unrolled
     std::vector<float> crow, vrow;
     for (int y = 0; y < ht; ++y) {
         const float* fc = nullptr;
@@ -248,37 +351,66 @@ void local_levels(const local_half<C, V, A>& h, double scale, std::vector<double
                 fv = float_row(h.variance, y, vrow);
             }
         }
-        const int cc = h.color.channels(), vc = h.variance.channels();
-        for (int x = 0; x < w; ++x) {
-            const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
-            bool counts = rows ? local_pixel(fc + x * cc, 1, fv + x * vc, 1, nc, one_var, scale, level[i], rel_var[i])
-                               : local_pixel(col.p + y * col.y + x * col.x, col.c, var.p + y * var.y + x * var.x,
-                                             var.c, nc, one_var, scale, level[i], rel_var[i]);
-            if (h.label) {
-                counts &= (h.label[i] & pixel_class_bits) == valid;
-            } else if (!h.alpha.empty()) {
-                const double a = atraits::load(al.p[y * al.y + x * al.x]);
-                counts &= a > 0 && std::isfinite(a);
-            }
-            if (!counts) {
-                level[i] = std::numeric_limits<double>::quiet_NaN();
-                rel_var[i] = std::numeric_limits<float>::quiet_NaN();
-            }
-        }
+        const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
+        if (rgb)
+            local_levels_row<3>(h, scale, y, fc, fv, level.data() + i, rel_var.data() + i);
+        else
+            local_levels_row<0>(h, scale, y, fc, fv, level.data() + i, rel_var.data() + i);
     }
 }
 
-// Median and median absolute deviation of p[0..n) (n >= 1, at most a few dozen values),
-// reordering p; the mean of the two middle values when n is even. Insertion sort, then the
-// deviations, which run outwards from the median in two sorted sequences, are merged up to
-// the middle (for these sizes several times faster than two selections).
-inline void median_and_mad(float* p, std::size_t n, double& med, double& mad) noexcept {
+// Batcher's odd-even merge sort of 16 values: 63 compare-exchanges (checked on all 2^16 0-1
+// inputs), branch-free, where insertion sort mispredicts about once per value.
+inline constexpr unsigned char sort16_network[63][2] = {
+    {0, 1}, {2, 3}, {0, 2}, {1, 3}, {1, 2}, {4, 5}, {6, 7}, {4, 6},
+    {5, 7}, {5, 6}, {0, 4}, {2, 6}, {2, 4}, {1, 5}, {3, 7}, {3, 5},
+    {1, 2}, {3, 4}, {5, 6}, {8, 9}, {10, 11}, {8, 10}, {9, 11}, {9, 10},
+    {12, 13}, {14, 15}, {12, 14}, {13, 15}, {13, 14}, {8, 12}, {10, 14}, {10, 12},
+    {9, 13}, {11, 15}, {11, 13}, {9, 10}, {11, 12}, {13, 14}, {0, 8}, {4, 12},
+    {4, 8}, {2, 10}, {6, 14}, {6, 10}, {2, 4}, {6, 8}, {10, 12}, {1, 9},
+    {5, 13}, {5, 9}, {3, 11}, {7, 15}, {7, 11}, {3, 5}, {7, 9}, {11, 13},
+    {1, 2}, {3, 4}, {5, 6}, {7, 8}, {9, 10}, {11, 12}, {13, 14},
+};
+
+// a <= b after: min and max, one instruction each and no branch where the machine has them.
+// Equal values come out as two copies of a: the same bits, but for zeros of both signs.
+template <class T>
+inline void compare_exchange(T& a, T& b) noexcept {
+    const T lo = std::min(a, b), hi = std::max(a, b);
+    a = lo;
+    b = hi;
+}
+
+template <class T, std::size_t... I>
+inline void sort16(T* v, std::index_sequence<I...>) noexcept {
+    (compare_exchange(v[sort16_network[I][0]], v[sort16_network[I][1]]), ...);
+}
+
+// Sorts p[0..n) ascending, no NaN and no -0 among them: the same values as any sort. Up to 16
+// values (a radius-1 window's two halves) through the network, padded with +Inf.
+template <class T>
+inline void sort_small(T* p, std::size_t n) noexcept {
+    if (n <= 16) {
+        T v[16];
+        for (std::size_t i = 0; i < 16; ++i) v[i] = i < n ? p[i] : std::numeric_limits<T>::infinity();
+        sort16(v, std::make_index_sequence<63>{});
+        for (std::size_t i = 0; i < n; ++i) p[i] = v[i];
+        return;
+    }
     for (std::size_t i = 1; i < n; ++i) {
-        const float v = p[i];
+        const T v = p[i];
         std::size_t j = i;
         for (; j > 0 && p[j - 1] > v; --j) p[j] = p[j - 1];
         p[j] = v;
     }
+}
+
+// Median and median absolute deviation of p[0..n) (n >= 1, at most a few dozen values),
+// reordering p; the mean of the two middle values when n is even. Sorted (sort_small), then the
+// deviations, which run outwards from the median in two sorted sequences, are merged up to
+// the middle (for these sizes several times faster than two selections).
+inline void median_and_mad(float* p, std::size_t n, double& med, double& mad) noexcept {
+    sort_small(p, n);
     const std::size_t k = n / 2;
     med = n % 2 ? static_cast<double>(p[k]) : 0.5 * (static_cast<double>(p[k - 1]) + p[k]);
     std::size_t right = static_cast<std::size_t>(
@@ -391,6 +523,13 @@ inline bool pair_may_exceed(double hi, double lo, double r, double z) noexcept {
     return !(d * d / (hi * lo) * (0.5 / r) < zm * zm);
 }
 
+// Whether pair_may_exceed(hi, lo, r, z) is surely false (hi, lo, r, z > 0), multiplied
+// through: no division. Its rounding (~1e-15 relatively) is far below the margin 1e-9.
+inline bool pair_surely_below(double hi, double lo, double r, double z) noexcept {
+    const double d = hi - lo, zm = z - 1e-6;
+    return 0.5 * d * d < zm * zm * (hi * lo) * r * (1.0 - 1e-9);
+}
+
 // t_df(q) with df rounded down to a grid of 64 steps per octave (from 1 to 2^34): a lower df
 // gives a higher threshold, so the rounding only makes the test a little stricter (df at most
 // 1.1% low), and the Newton iterations run once per grid step and sequence of frames.
@@ -485,6 +624,75 @@ inline void window_offsets(int w, int radius, std::vector<std::ptrdiff_t>& out) 
             if (dx != 0 || dy != 0) out.push_back(static_cast<std::ptrdiff_t>(dy) * w + dx);
 }
 
+// Row y's usable levels of both halves summed per pixel, and counted, into the ring slot
+// y mod 3 (window_columns reads three consecutive rows: each is summed once).
+inline void row_levels(const local_test_scratch& s, int w, int y, local_band_scratch& band) {
+    const std::size_t n = static_cast<std::size_t>(w), slot = static_cast<std::size_t>(y % 3);
+    band.row_sum[slot].resize(n);
+    band.row_count[slot].resize(n);
+    const std::size_t row = static_cast<std::size_t>(y) * n;
+    const float* r0 = s.rel_var[0].data() + row;
+    const float* r1 = s.rel_var[1].data() + row;
+    const double* l0 = s.level[0].data() + row;
+    const double* l1 = s.level[1].data() + row;
+    double* sum = band.row_sum[slot].data();
+    std::uint8_t* count = band.row_count[slot].data();
+    for (std::size_t x = 0; x < n; ++x) {
+        const bool u0 = r0[x] == r0[x], u1 = r1[x] == r1[x];
+        sum[x] = (u0 ? l0[x] : 0.0) + (u1 ? l1[x] : 0.0);
+        count[x] = static_cast<std::uint8_t>(u0 + u1);
+    }
+}
+
+// Row y's window sums for the screen, radius 1 (rows y - 1, y and y + 1 in row_levels' ring):
+// per column x, the usable levels of both halves over the three rows (column_sum[0]) and over
+// the rows above and below (column_sum[1]), with their counts. Vectorizes, where
+// neighbour_sum is a chain of dependent additions; the window's sum at x is
+// column_sum[0][x - 1] + column_sum[1][x] + column_sum[0][x + 1], in another order than
+// neighbour_sum's (within 15 2^-53 of it, relatively: spatial_screen_may allows for that).
+inline void window_columns(int w, int y, local_band_scratch& band) {
+    const std::size_t n = static_cast<std::size_t>(w);
+    for (int t = 0; t < 2; ++t) {
+        band.column_sum[t].resize(n);
+        band.column_count[t].resize(n);
+    }
+    const double* a = band.row_sum[(y + 2) % 3].data();  // row y - 1
+    const double* b = band.row_sum[y % 3].data();
+    const double* c = band.row_sum[(y + 1) % 3].data();
+    const std::uint8_t* na = band.row_count[(y + 2) % 3].data();
+    const std::uint8_t* nb = band.row_count[y % 3].data();
+    const std::uint8_t* nc = band.row_count[(y + 1) % 3].data();
+    double* full = band.column_sum[0].data();
+    double* outer = band.column_sum[1].data();
+    std::uint8_t* full_n = band.column_count[0].data();
+    std::uint8_t* outer_n = band.column_count[1].data();
+    for (std::size_t x = 0; x < n; ++x) {
+        outer[x] = a[x] + c[x];
+        full[x] = (a[x] + c[x]) + b[x];
+        outer_n[x] = static_cast<std::uint8_t>(na[x] + nc[x]);
+        full_n[x] = static_cast<std::uint8_t>(na[x] + nc[x] + nb[x]);
+    }
+}
+
+// Whether the spatial screen in local_score may pass, from a window sum `approx` of the same
+// count usable levels in another order: false only where it surely fails. The levels are
+// positive, so the two sums differ by less than 1e-12 relatively (16 values). Paulson's z at
+// m = 1 / r (a1 = r / 9, a2 = a1 / n) rises with c = (f + 2) / 3 (paulson_may_exceed); at c
+// = p / (3 approx), multiplied through by 3 n approx, it is M / sqrt(n a1 (p^2 + 9 n approx^2)):
+// no division. The margin 1e-4 on z is far above what the sums' difference, this form's
+// rounding and the exact screen's (~1e-8 where a1 is least) move it.
+inline bool spatial_screen_may(double l_hi, double approx, std::size_t count, double r_other, double zq,
+                               int min_neighbours) noexcept {
+    const double n = static_cast<double>(count);
+    if (count < static_cast<std::size_t>(min_neighbours) || !(approx > 0)) return false;
+    if (!(l_hi * n > approx * (1.0 - 1e-12))) return false;
+    const double z = zq - 1.0 - 1e-4, a1 = r_other * (1.0 / 9.0);
+    if (!(z > 0 && a1 < 0.5)) return true;  // z need not rise with c
+    const double p = l_hi * n * (1.0 + 1e-12) + 2.0 * approx;
+    const double m = (n - a1) * p - 3.0 * n * (1.0 - a1) * approx;
+    return m > 0 && m * m >= z * z * n * a1 * (p * p + 9.0 * n * approx * approx);
+}
+
 // The same levels into out, sorted, and their mean summed in that order: the same bits under
 // any flip or transpose of the frame.
 inline double neighbour_levels(const local_test_scratch& s, int w, int h, int x, int y, int radius,
@@ -497,7 +705,7 @@ inline double neighbour_levels(const local_test_scratch& s, int w, int h, int x,
             for (int half = 0; half < 2; ++half)
                 if (s.rel_var[half][j] == s.rel_var[half][j]) out.push_back(s.level[half][j]);
         }
-    std::sort(out.begin(), out.end());
+    sort_small(out.data(), out.size());
     double sum = 0;
     for (const double l : out) sum += l;
     return out.empty() ? 0.0 : sum / static_cast<double>(out.size());
@@ -530,11 +738,19 @@ inline double spatial_score(double hi, double lo, double m, const std::vector<do
     return p > 0 ? normal_upper_quantile(p) / k.zq : static_cast<double>(std::numeric_limits<float>::max());
 }
 
+// A window's sum and count of usable levels from window_columns (known: false where not taken).
+struct window_sum {
+    bool known = false;
+    double sum = 0;
+    std::size_t count = 0;
+};
+
 // One pixel, the brighter half hi: the pair test, then (options.spatial) the spatial test,
-// each at q / 2 when both run. Returns the score (> 1: flagged), 0 otherwise.
+// each at q / 2 when both run; fast (when known) rules the spatial test out early. Returns the
+// score (> 1: flagged), 0 otherwise.
 inline double local_score(const local_test_options& o, const local_levels_q& k, const local_test_scratch& s,
-                          local_band_scratch& band, int w, int h, int x, int y, int hi, bool& by_spatial,
-                          double& log_p) {
+                          local_band_scratch& band, int w, int h, int x, int y, int hi, const window_sum& fast,
+                          bool& by_spatial, double& log_p) {
     local_test_result& res = band.found;
     const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
     const double l_hi = s.level[hi][i], l_lo = s.level[1 - hi][i];
@@ -543,13 +759,14 @@ inline double local_score(const local_test_options& o, const local_levels_q& k, 
     // Screens, from r~ >= r_other (m <= 1 / r_other): the pair statistic with the other half's
     // own r bounds T from above and the threshold from below; for the spatial test, the
     // level ratio must exceed 1 and Paulson's z at m = 1 / r_other must come near z_q.
-    const bool pair_may = pair_may_exceed(l_hi, l_lo, r_other, zq) && [&] {
+    bool pair_may = !pair_surely_below(l_hi, l_lo, r_other, zq) && pair_may_exceed(l_hi, l_lo, r_other, zq);
+    if (pair_may) {
         const double t_pair = pair_statistic(l_hi, l_lo, r_other);
-        return t_pair > zq && t_pair > t_threshold(band, q, std::min(2.0 / r_other, 1e10));
-    }();
+        pair_may = t_pair > zq && t_pair > t_threshold(band, q, std::min(2.0 / r_other, 1e10));
+    }
     double mu = 0;
     bool spatial_may = false;
-    if (o.spatial) {
+    if (o.spatial && (!fast.known || spatial_screen_may(l_hi, fast.sum, fast.count, r_other, zq, o.min_neighbours))) {
         std::size_t count = 0;
         const double sum = neighbour_sum(s, w, h, x, y, o.radius, band.window, count);
         const double m_max = 1.0 / r_other, n = static_cast<double>(count);
@@ -608,7 +825,14 @@ inline void local_rows(const local_test_options& o, const local_levels_q& k, con
     }
     found.tested = found.screened = found.spatial = 0;
     window_offsets(w, o.radius, band.window);
-    for (int y = y0; y < y1; ++y)
+    int ready = -1;  // the last row in row_levels' ring
+    for (int y = y0; y < y1; ++y) {
+        const bool columns = o.spatial && o.radius == 1 && y >= 1 && y + 1 < h;
+        if (columns) {
+            for (int r = std::max(ready + 1, y - 1); r <= y + 1; ++r) row_levels(s, w, r, band);
+            ready = y + 1;
+            window_columns(w, y, band);
+        }
         for (int x = 0; x < w; ++x) {
             const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
             const float ra = s.rel_var[0][i], rb = s.rel_var[1][i];
@@ -617,15 +841,23 @@ inline void local_rows(const local_test_options& o, const local_levels_q& k, con
             const double la = s.level[0][i], lb = s.level[1][i];
             if (la == lb) continue;
             const int hi = la > lb ? 0 : 1;  // the half that could hold a firefly
+            window_sum fast;
+            if (columns && x >= 1 && x + 1 < w) {
+                const std::size_t l = static_cast<std::size_t>(x - 1), c = l + 1, r = l + 2;
+                fast.known = true;
+                fast.sum = band.column_sum[0][l] + band.column_sum[1][c] + band.column_sum[0][r];
+                fast.count = std::size_t{band.column_count[0][l]} + band.column_count[1][c] + band.column_count[0][r];
+            }
             bool by_spatial = false;
             double log_p = 0;
-            const double score = local_score(o, k, s, band, w, h, x, y, hi, by_spatial, log_p);
+            const double score = local_score(o, k, s, band, w, h, x, y, hi, fast, by_spatial, log_p);
             if (!(score > 1.0)) continue;
             found.half[hi].index.push_back(static_cast<std::uint32_t>(i));
             found.half[hi].score.push_back(static_cast<float>(std::min(score, static_cast<double>(FLT_MAX))));
             found.half[hi].log_p.push_back(std::min(log_p, 0.0));
             found.spatial += by_spatial;
         }
+    }
 }
 
 }  // namespace detail
