@@ -43,7 +43,7 @@ struct options {
 // firefly::cross_buffer_detector's limits: without variance the noise comes from the spread of
 // the buffers, and it refuses fewer than 4 buffers without variance ("2 or 3 buffers need
 // variance"); it takes at most 64.
-inline constexpr int min_renders = 4;
+inline constexpr int min_renders = 3;
 inline constexpr int max_buffers = 64;
 
 // Option groups: the two-half detector's options mean nothing to the K-buffer one and the
@@ -137,7 +137,7 @@ const char* const description =
     "    firefly half_a.exr half_b.exr -o clean.exr\n"
     "  K >= 2 buffers with variance (K = 2 is the same as two halves):\n"
     "    firefly --buffers b_0.exr b_1.exr b_2.exr b_3.exr -o clean.exr\n"
-    "  N >= 4 colour-only renders of one frame with different seeds (EXR or PFM):\n"
+    "  N >= 3 colour-only renders of one frame with different seeds (EXR or PFM):\n"
     "    firefly --renders r_0.exr r_1.exr r_2.exr r_3.exr r_4.exr r_5.exr r_6.exr r_7.exr -o clean.exr\n"
     "  a sequence: '#' runs in every path, e.g.\n"
     "    firefly beauty_a.####.exr beauty_b.####.exr --frames 1-240 -o clean.####.exr\n"
@@ -189,7 +189,7 @@ inline void add_io_options(CLI::App& app, options& c, raw_args& r) {
         ->type_name("FILE...")
         ->group("inputs");
     app.add_option("--renders", r.renders,
-                   "N = 4 to 64 colour-only renders of one frame with different seeds (OpenEXR or PFM); every "
+                   "N = 3 to 64 colour-only renders of one frame with different seeds (OpenEXR or PFM); every "
                    "file after it is a render; the output's variance channels are named by --variance")
         ->type_name("FILE...")
         ->group("inputs");
@@ -340,7 +340,7 @@ inline std::string choose_inputs(options& c, const raw_args& r) {
     const int k = c.buffers();
     if (renders && k < min_renders)
         return "--renders needs at least " + std::to_string(min_renders) + " renders, got " + std::to_string(k) +
-               " (the detector takes fewer than 4 buffers only with variance channels: use --buffers)";
+               " (two buffers need variance channels: use --buffers or two half buffers)";
     if (buffers && k < 2) return "--buffers needs at least 2 files, got " + std::to_string(k);
     if (k > max_buffers) return flag + " takes at most " + std::to_string(max_buffers) + " files, got " + std::to_string(k);
     return {};

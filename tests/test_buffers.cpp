@@ -241,8 +241,11 @@ TEST_CASE("K buffers: more than half non-finite is left and reported", "[buffers
 TEST_CASE("K buffers: inputs refused as status values", "[buffers]") {
     frame_k f = noisy_frame(3, 6, 6, 5);
     cross_buffer_detector d;
-    CHECK(d.process(f.views(false)).error.code() == errc::invalid_argument);  // K = 3 needs variance
-    auto v = f.views();
+    CHECK(d.process(f.views(false)).error.ok());  // K = 3: the spread of the buffers will do
+    auto v = f.views(false);
+    v.resize(2);
+    CHECK(d.process(v).error.code() == errc::invalid_argument);  // K = 2 needs variance
+    v = f.views();
     v[1].color = *make_image_view(f.color[1].data(), 3, 6, 3);
     CHECK(d.process(v).error.code() == errc::size_mismatch);
     v = f.views();
@@ -259,10 +262,11 @@ TEST_CASE("K buffers: inputs refused as status values", "[buffers]") {
 
 // The cap's promise: without fireflies, at most q of the pixel-buffers are flagged at the
 // per-pixel level (report.candidates: pixels, each with one buffer or more), with a binomial
-// margin, over seeds, sample shapes, K and with and without variance.
+// margin, over seeds, sample shapes, K and with and without variance (K = 3 without variance:
+// 22 of 165,888 against a promise of 166; 7 of 80 frames below, bound 16).
 TEST_CASE("K buffers: false alarms within q at the per-pixel level", "[buffers][calibration]") {
     const double q = 1e-3;
-    for (const int k : {4, 8})
+    for (const int k : {3, 4, 8})
         for (const bool var : {true, false}) {
             std::size_t flagged = 0, tested = 0;
             for (const std::uint64_t seed : {1u, 2u, 3u})
@@ -290,7 +294,7 @@ TEST_CASE("K buffers: false alarms within q at the per-pixel level", "[buffers][
 // 4096 pixels would be flagged).
 TEST_CASE("K buffers: frames without fireflies are left alone in 1 - alpha of cases", "[buffers][calibration]") {
     const double alpha = 0.1;
-    for (const int k : {4, 8})
+    for (const int k : {3, 4, 8})
         for (const bool var : {true, false}) {
             int frames = 0, touched = 0;
             for (std::uint64_t seed = 1; seed <= 40; ++seed)

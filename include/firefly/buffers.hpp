@@ -85,8 +85,10 @@
 //       non-finite buffers is left as it is and counted (report.left, error no_valid_pixels).
 //   K = 2 is the paper's method: the two buffers go to firefly::detector unchanged (variance
 //       required), with its global ESD, highlight check and spatial reconstruction.
-// Variance: that of each buffer's mean (accumulator.hpp gives it). Required for K = 3;
-// optional for K >= 4, where the spread of the buffers estimates the noise.
+// Variance: that of each buffer's mean (accumulator.hpp gives it). Required for K = 2;
+// optional for K >= 3, where the spread of the buffers estimates the noise (K = 3: 2 degrees of
+// freedom a pixel, pooled over the neighbourhood; used instead of given variances only for
+// K >= 4 with use_variance off).
 //
 // Deterministic and independent of the order of the buffers: the per-pixel statistics are
 // taken in the order of the sorted levels (ties by colour), so a permutation of the buffers
@@ -115,7 +117,7 @@ namespace firefly {
 
 // One buffer: colour (1 to 4 channels; the first three are colour, a 4th is carried along)
 // and the variance of its mean (1 channel or one per colour channel; empty in every buffer
-// or in none, and only when K >= 4). Given variances are rebuilt and checked for NaN/Inf
+// or in none, and only when K >= 3). Given variances are rebuilt and checked for NaN/Inf
 // even when use_variance is off.
 template <class C, class V = C>
 struct buffer_view {
@@ -398,7 +400,7 @@ private:
         if (b == nullptr || k < 2) return status{errc::invalid_argument, "at least 2 buffers are needed"};
         if (k > detail::max_buffers) return status{errc::invalid_argument, "at most 64 buffers"};
         const bool has_var = !b[0].variance.empty();
-        if (k <= 3 && !has_var) return status{errc::invalid_argument, "2 or 3 buffers need variance"};
+        if (k <= 2 && !has_var) return status{errc::invalid_argument, "2 buffers need variance"};
         for (int i = 0; i < k; ++i) {
             if (b[i].color.empty()) return status{errc::empty_image, "a buffer's colour is empty"};
             if (b[i].color.channels() > 4) return status{errc::channel_mismatch, "colour needs 1 to 4 channels"};
