@@ -1,9 +1,11 @@
 #include <firefly/bound.hpp>
 #include <firefly/esd.hpp>
+#include <firefly/statistics.hpp>
 
 #include <algorithm>
 #include <cfloat>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <numeric>
 #include <random>
@@ -340,4 +342,24 @@ TEST_CASE("the detector's histogram median and MAD equal a full sort, bit for bi
         for (std::size_t i = 0; i < n; ++i) two[i] = i % 2 ? 1.0f : 1e30f;
         check(two, "two values far apart");
     }
+}
+
+// The order the detector visits its lists of pixels in (pixel index in the high word, the
+// entry below): the radix sort against std::stable_sort on the high words, for sizes that need
+// one, two and three passes, equal high words (kept in order), an empty list and one key.
+TEST_CASE("sort_by_high_word orders by the high word, stably", "[bound]") {
+    std::mt19937_64 rng(5);
+    std::vector<std::uint64_t> tmp;
+    for (const std::uint64_t top : {std::uint64_t{1000}, std::uint64_t{3000000}, std::uint64_t{0xffffffffu}})
+        for (const std::size_t n : {std::size_t{0}, std::size_t{1}, std::size_t{5000}}) {
+            std::vector<std::uint64_t> keys(n);
+            for (std::size_t j = 0; j < n; ++j)
+                keys[j] = ((rng() % (top + 1)) << 32) | static_cast<std::uint64_t>(j);  // repeats among the high words
+            if (n > 1) keys[1] = (top << 32) | 1u;  // the largest high word present
+            std::vector<std::uint64_t> want = keys;
+            std::stable_sort(want.begin(), want.end(), [](std::uint64_t a, std::uint64_t b) { return (a >> 32) < (b >> 32); });
+            firefly::detail::sort_by_high_word(keys, tmp);
+            INFO("top " << top << ", n " << n);
+            CHECK(keys == want);
+        }
 }

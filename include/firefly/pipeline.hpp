@@ -210,7 +210,7 @@ public:
     std::size_t scratch_bytes() const noexcept {
         std::size_t n = cache_->bytes() + local_scratch_.bytes() + local_result_.bytes() + calibration_.bytes() +
                         pairs_.capacity() * sizeof(std::uint32_t) + pair_log_p_.capacity() * sizeof(double) +
-                        visit_.capacity() * sizeof(std::uint64_t) +
+                        (visit_.capacity() + visit_tmp_.capacity()) * sizeof(std::uint64_t) +
                         frame_log_p_.capacity() * sizeof(double);
         for (const auto& h : halves_)
             n += h.sd.capacity() * sizeof(float) + h.label.capacity() +
@@ -741,7 +741,7 @@ private:
     void for_entries_by_row(const std::uint32_t* list, std::size_t n, F&& f) {
         visit_.resize(n);
         for (std::size_t j = 0; j < n; ++j) visit_[j] = (static_cast<std::uint64_t>(list[j]) << 32) | j;
-        std::sort(visit_.begin(), visit_.end());
+        detail::sort_by_high_word(visit_, visit_tmp_);
         for_chunks(n, [&](std::size_t k0, std::size_t k1) {
             std::vector<float> pool;
             for (std::size_t k = k0; k < k1; ++k) f(static_cast<std::size_t>(visit_[k] & 0xffffffffu), pool);
@@ -1013,7 +1013,7 @@ private:
     local_test_result local_result_;
     std::vector<double> frame_log_p_;  // the one-half fireflies' p-values (log), for the frame's level
     std::vector<double> pair_log_p_;   // per pair and half: the p-value (log) of its excess; NaN: none
-    std::vector<std::uint64_t> visit_;  // for_entries_by_row
+    std::vector<std::uint64_t> visit_, visit_tmp_;  // for_entries_by_row
     double frame_level_ = 0;           // log of the largest p-value the frame's decision keeps
 };
 

@@ -14,6 +14,9 @@
 //                     values >= 0; others negative or NaN): a 65536-bucket histogram built
 //                     while the values are written, then the exact median in one more pass
 //                     and the exact MAD in one more (bracketed from the same histogram).
+//   sort_by_high_word 64-bit keys ordered by their high 32 bits, stably (an LSD radix sort of
+//                     11 bits a pass, as many passes as the largest key needs): the detector's
+//                     lists of pixels put in row order, with the entry's index below.
 #pragma once
 
 #include <algorithm>
@@ -22,6 +25,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#include <utility>
 #include <vector>
 
 #if defined(__SSE2__) || defined(_M_X64)
@@ -215,6 +219,25 @@ inline std::uint32_t key_bucket(double key) noexcept {
     std::memcpy(&bits, &f, sizeof bits);
     bits = (bits & 0x80000000u) ? ~bits : (bits | 0x80000000u);
     return bits >> 20;
+}
+
+// keys ordered by their high 32 bits, keeping the order of equal ones (tmp: scratch). With
+// distinct high words, as the detector's pixel lists have, this is std::sort's order.
+inline void sort_by_high_word(std::vector<std::uint64_t>& keys, std::vector<std::uint64_t>& tmp) {
+    constexpr int bits = 11;
+    constexpr std::size_t buckets = std::size_t{1} << bits;
+    std::uint64_t top = 0;
+    for (const std::uint64_t k : keys) top = std::max(top, k >> 32);
+    tmp.resize(keys.size());
+    std::array<std::size_t, buckets> start;
+    for (int shift = 32; shift < 64 && (shift == 32 || (top >> (shift - 32)) != 0); shift += bits) {
+        start.fill(0);
+        for (const std::uint64_t k : keys) ++start[(k >> shift) & (buckets - 1)];
+        std::size_t at = 0;
+        for (std::size_t& b : start) at += std::exchange(b, at);
+        for (const std::uint64_t k : keys) tmp[start[(k >> shift) & (buckets - 1)]++] = k;
+        keys.swap(tmp);
+    }
 }
 
 }  // namespace detail
