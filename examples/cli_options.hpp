@@ -41,7 +41,7 @@ struct options {
 };
 
 // firefly::cross_buffer_detector's limits: without variance the noise comes from the spread of
-// the buffers, and it refuses fewer than 4 buffers without variance ("2 or 3 buffers need
+// the buffers, and it refuses fewer than 3 buffers without variance ("2 buffers need
 // variance"); it takes at most 64.
 inline constexpr int min_renders = 3;
 inline constexpr int max_buffers = 64;
