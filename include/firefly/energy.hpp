@@ -262,23 +262,24 @@ struct excess_map {
 
 }  // namespace detail
 
-// Work arrays of the energy return, kept between frames. Frame-sized: the profile (and, in
-// return_energy_to_image, the excess); the rest is per node or per row.
+// Work arrays of the energy return, kept between frames. Frame-sized: the profile; the rest is
+// per node, per row or per excess pixel.
 struct energy_scratch {
     std::vector<float> profile;         // the shape's 3x3 median, full frame (float: half the
                                         // memory; every sum is taken in double)
-    std::vector<double> xy, yx;         // the nodes' records, summed x first and y first
+    std::vector<double> xy;             // the nodes' records: summed x first, then the mean of
+                                        // both orders (energy_y_then_x)
     std::vector<double> factor;         // the nodes: the return's share of the profile, 3
     detail::node_axis ax, ay;           // where the nodes are
-    std::vector<float> excess;          // return_energy_to_image (float, as the image)
+    std::vector<std::uint32_t> order;   // return_energy_to_image: its list in pixel order
     std::vector<double> cells, coarse;  // the coarse scale: cell sums, their Gaussian (empty: off)
     detail::cell_axis cx, cy;           // where the cells are
     double coarse_var_scale = 0;        // sum w_fine^2 / sum w_coarse^2 (per pixel weights)
     detail::excess_map where;           // the excess pixels
     std::size_t bytes() const noexcept {
         return profile.capacity() * sizeof(float) + where.bytes() +
-               (xy.capacity() + yx.capacity() + factor.capacity() + cells.capacity() + coarse.capacity()) * sizeof(double) +
-               excess.capacity() * sizeof(float);
+               (xy.capacity() + factor.capacity() + cells.capacity() + coarse.capacity()) * sizeof(double) +
+               order.capacity() * sizeof(std::uint32_t);
     }
 };
 
@@ -318,20 +319,23 @@ inline void map_excess(const std::vector<E>& excess, int w, int h, excess_map& m
     });
 }
 
-// Pixels x0..x1 of one row of the model's inputs as records (at out + x record): e (3
-// channels), the profile (3), |e|^2, 0; every value taken to double once. A row without excess
-// (has_e false) is not read: M = V = +0 (excess_map).
-template <class E, class P>
-inline void input_records(const E* e, const P* pr, bool has_e, int x0, int x1, double* out) noexcept {
-    for (int x = x0; x <= x1; ++x) {
+// One row of the model's inputs as records (at out + x record): e (3 channels, from the
+// excess_map: +0 where nothing was removed), the profile (3), |e|^2, 0; every value in double.
+template <class P>
+inline void input_records(const excess_map& where, const P* pr, int y, int w, double* out) noexcept {
+    for (int x = 0; x < w; ++x) {
         const std::size_t q = static_cast<std::size_t>(x) * 3;
         double* o = out + static_cast<std::size_t>(x) * record;
         for (std::size_t c = 0; c < 3; ++c) {
-            o[c] = has_e ? static_cast<double>(e[q + c]) : 0.0;
+            o[c] = 0.0;
             o[3 + c] = static_cast<double>(pr[q + c]);
         }
-        o[6] = has_e ? squared(e + q) : 0.0;
-        o[7] = 0.0;
+        o[6] = o[7] = 0.0;
+    }
+    for (const excess_pixel* e = where.first(y); e != where.last(y); ++e) {
+        double* o = out + static_cast<std::size_t>(e->x) * record;
+        for (std::size_t c = 0; c < 3; ++c) o[c] = e->v[c];
+        o[6] = e->v[3];
     }
 }
 
@@ -537,14 +541,16 @@ inline void energy_y_then_x(const std::vector<P>& profile, const excess_map& whe
                             const node_axis& ax, const node_axis& ay, const tap_weights (&t)[2], energy_scratch& s,
                             const executor& exec) {
     const std::size_t nx = static_cast<std::size_t>(ax.count), ny = static_cast<std::size_t>(ay.count);
-    s.yx.resize(ny * nx * record);
     exec.run(ny, [&](std::size_t i) {
         thread_local std::vector<double> line;  // per thread, kept (see median3x3_rows)
         const int p2 = ay.pos2(static_cast<int>(i));
         y_sums(p2, t[(p2 & 1) != 0], w, h, profile, where, line);
         for (std::size_t j = 0; j < nx; ++j) {
             const int q2 = ax.pos2(static_cast<int>(j));
-            record_sums(q2, t[(q2 & 1) != 0], w, line.data(), record, &s.yx[(i * nx + j) * record]);
+            double yx[record];
+            record_sums(q2, t[(q2 & 1) != 0], w, line.data(), record, yx);
+            double* xy = &s.xy[(i * nx + j) * record];  // x first, from energy_x_then_y
+            for (int k = 0; k < record; ++k) xy[k] = 0.5 * (xy[k] + yx[k]);
         }
     });
 }
@@ -562,8 +568,8 @@ inline tap_weights box_taps(int half) {
 
 // Box sums of every cell: excess (3), profile (3), |e|^2, |e|^2 / |P|^2 (P the profile; 0 where
 // it is 0); the mean of both orders.
-template <class E, class P>
-inline void cell_sums(const std::vector<E>& excess, const std::vector<P>& profile, const excess_map& where,
+template <class P>
+inline void cell_sums(const std::vector<P>& profile, const excess_map& where,
                       int w, int h, const cell_axis& cx, const cell_axis& cy, std::vector<double>& cells,
                       const executor& exec) {
     const std::size_t ncx = static_cast<std::size_t>(cx.count), hw = static_cast<std::size_t>(cx.width / 2);
@@ -582,7 +588,7 @@ inline void cell_sums(const std::vector<E>& excess, const std::vector<P>& profil
             }
             const std::size_t at = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) * 3;
             double* line = &px[static_cast<std::size_t>(r) * n];
-            input_records(&excess[at], &profile[at], where.row(y), 0, w - 1, line);
+            input_records(where, &profile[at], y, w, line);
             for (std::size_t x = 0; x < static_cast<std::size_t>(w); ++x) {
                 double* o = line + x * record;
                 if (!(o[6] > 0)) continue;  // o[7] stays 0
@@ -728,7 +734,7 @@ inline void energy_factors(energy_scratch& s) {
         for (std::size_t j = 0; j < nx; ++j) {
             const std::size_t n = i * nx + j;
             double r[record], f[3];
-            for (int k = 0; k < record; ++k) r[k] = 0.5 * (s.xy[n * record + k] + s.yx[n * record + k]);
+            for (int k = 0; k < record; ++k) r[k] = s.xy[n * record + k];  // both orders' mean
             shrunk_ratio(r, f);
             if (!s.coarse.empty()) {
                 double c[record], fc[3];
@@ -784,8 +790,7 @@ namespace detail {
 // The coarse scale's cells, sums and Gaussian (see cell_sums): cells of the odd width nearest
 // a quarter of sigma (interpolating a Gaussian between points a quarter of its width apart
 // errs by ~1/128 of its peak), the Gaussian over the cells sigma / width wide.
-template <class E>
-inline void coarse_model(const std::vector<E>& excess, const excess_map& where, int w, int h,
+inline void coarse_model(const excess_map& where, int w, int h,
                          const energy_scales& sc, const tap_weights& fine, energy_scratch& s, const executor& exec) {
     if (!(sc.coarse > sc.fine)) {
         s.cells.clear(), s.coarse.clear();
@@ -796,7 +801,7 @@ inline void coarse_model(const std::vector<E>& excess, const excess_map& where, 
     s.cy = make_cell_axis(h, width);
     const double sigma = sc.coarse / width;
     const tap_weights tw = make_taps(sigma, std::max(1, static_cast<int>(std::ceil(3.0 * sigma))), false);
-    cell_sums(excess, s.profile, where, w, h, s.cx, s.cy, s.cells, exec);
+    cell_sums(s.profile, where, w, h, s.cx, s.cy, s.cells, exec);
     coarse_blur(s.cells, s.cx, s.cy, tw, s.coarse, exec);
     auto sum_sq = [](const tap_weights& t) {  // one axis, both sides
         double v = t.sq[0];
@@ -808,14 +813,13 @@ inline void coarse_model(const std::vector<E>& excess, const excess_map& where, 
 }
 }  // namespace detail
 
-// The model of the energy return for one frame, from the removed excess `excess` (3
-// interleaved channels, w x h, 0 where nothing was removed) and the image whose 3x3 median
-// shapes the return (3 channels, finite, >= 0; row y written by shape_rows(y, out), or held
-// whole: energy_model): the profile and the nodes' factors in `s`, read back per pixel by
-// energy_at. sc: the Gaussians' widths in pixels.
-template <class E, class ShapeRows>
-inline void energy_model_rows(const std::vector<E>& excess, ShapeRows&& shape_rows, int w, int h, energy_scales sc,
-                              energy_scratch& s, const executor& exec) {
+// The model of the energy return for one frame, from the removed excess in s.where (see
+// excess_map) and the image whose 3x3 median shapes the return (3 channels, finite, >= 0; row
+// y written by shape_rows(y, out)): the profile and the nodes' factors in `s`, read back per
+// pixel by energy_at. sc: the Gaussians' widths in pixels.
+template <class ShapeRows>
+inline void energy_model_mapped(ShapeRows&& shape_rows, int w, int h, energy_scales sc, energy_scratch& s,
+                                const executor& exec) {
     const double sigma = sc.fine;
     const int r = std::max(1, static_cast<int>(std::ceil(3.0 * sigma)));
     const detail::tap_weights taps[2] = {detail::make_taps(sigma, r, false), detail::make_taps(sigma, r, true)};
@@ -823,11 +827,19 @@ inline void energy_model_rows(const std::vector<E>& excess, ShapeRows&& shape_ro
     s.ax = detail::make_node_axis(w, step);
     s.ay = detail::make_node_axis(h, step);
     detail::median3x3_rows(shape_rows, s.profile, w, h, exec);
-    detail::map_excess(excess, w, h, s.where, exec);
     detail::energy_x_then_y(s.profile, s.where, w, h, s.ax, s.ay, taps, s, exec);
     detail::energy_y_then_x(s.profile, s.where, w, h, s.ax, s.ay, taps, s, exec);
-    detail::coarse_model(excess, s.where, w, h, sc, taps[0], s, exec);
+    detail::coarse_model(s.where, w, h, sc, taps[0], s, exec);
     detail::energy_factors(s);
+}
+
+// The same from the excess as a frame (3 interleaved channels, w x h, 0 where nothing was
+// removed; row y of the shape written by shape_rows, or held whole: energy_model).
+template <class E, class ShapeRows>
+inline void energy_model_rows(const std::vector<E>& excess, ShapeRows&& shape_rows, int w, int h, energy_scales sc,
+                              energy_scratch& s, const executor& exec) {
+    detail::map_excess(excess, w, h, s.where, exec);
+    energy_model_mapped(shape_rows, w, h, sc, s, exec);
 }
 
 inline void energy_model(const std::vector<double>& excess, const std::vector<double>& shape, int w, int h,
@@ -958,6 +970,42 @@ void restore_light(const image_view<C>& color, int x, int y, const double* old, 
         if (add[c] > 0) color.store(x, y, c, old[c]);
 }
 
+namespace detail {
+// The excess_map of what the rebuild took from `color`: at pixel rebuilt[e], before[3 e + c]
+// less the cleaned value, where that is finite and positive (else +0), as a float (what a
+// frame-sized float image of it would hold; at most FLT_MAX), straight from the list: nothing
+// frame-sized. The list is taken in pixel order (sorted through `order` when it is not; of a
+// pixel listed twice the last entry counts); entries outside the image are skipped.
+template <class C>
+inline void map_rebuilt_excess(const image_view<C>& color, const std::uint32_t* rebuilt, const float* before,
+                               std::size_t n, excess_map& m, std::vector<std::uint32_t>& order) {
+    const int w = color.width(), h = color.height();
+    const std::size_t np = color.pixel_count();
+    order.resize(n);
+    for (std::size_t e = 0; e < n; ++e) order[e] = static_cast<std::uint32_t>(e);
+    if (!std::is_sorted(rebuilt, rebuilt + n))
+        std::stable_sort(order.begin(), order.end(), [&](std::uint32_t i, std::uint32_t j) { return rebuilt[i] < rebuilt[j]; });
+    m.start.assign(static_cast<std::size_t>(h) + 1, 0);
+    m.pixels.clear();
+    for (std::size_t j = 0; j < n; ++j) {
+        const std::uint32_t e = order[j], p = rebuilt[e];
+        if (p >= np || (j + 1 < n && rebuilt[order[j + 1]] == p)) continue;
+        const int x = static_cast<int>(p % static_cast<std::uint32_t>(w));
+        const int y = static_cast<int>(p / static_cast<std::uint32_t>(w));
+        float f[3];
+        for (int c = 0; c < 3; ++c) {
+            const double d = static_cast<double>(before[static_cast<std::size_t>(e) * 3 + static_cast<std::size_t>(c)]) -
+                             color.load(x, y, c);
+            f[c] = std::isfinite(d) && d > 0 ? static_cast<float>(std::min(d, static_cast<double>(FLT_MAX))) : 0.0f;
+        }
+        if (f[0] == 0.0f && f[1] == 0.0f && f[2] == 0.0f) continue;  // as map_excess: no record
+        m.pixels.push_back({x, {static_cast<double>(f[0]), static_cast<double>(f[1]), static_cast<double>(f[2]), squared(f)}});
+        ++m.start[static_cast<std::size_t>(y) + 1];
+    }
+    for (std::size_t y = 0; y < static_cast<std::size_t>(h); ++y) m.start[y + 1] += m.start[y];
+}
+}  // namespace detail
+
 // The energy return on one cleaned image (the first three channels of `color`): pixel
 // rebuilt[e] held before[3 e .. 3 e + 2] before it was rebuilt. The return is added wherever it
 // is positive, never where keep[p] is false (black background, alpha 0): a change far below the
@@ -970,27 +1018,18 @@ energy_totals return_energy_to_image(const image_view<C>& color, const std::uint
     energy_totals t;
     const int w = color.width(), h = color.height();
     if (color.channels() < 3) return t;
-    const std::size_t np = color.pixel_count();
-    s.excess.assign(np * 3, 0.0f);
-    for (std::size_t e = 0; e < n; ++e) {
-        const int x = static_cast<int>(rebuilt[e] % static_cast<std::uint32_t>(w));
-        const int y = static_cast<int>(rebuilt[e] / static_cast<std::uint32_t>(w));
-        for (int c = 0; c < 3; ++c) {
-            const double d = static_cast<double>(before[e * 3 + static_cast<std::size_t>(c)]) - color.load(x, y, c);
-            s.excess[static_cast<std::size_t>(rebuilt[e]) * 3 + static_cast<std::size_t>(c)] =
-                std::isfinite(d) && d > 0 ? static_cast<float>(std::min(d, static_cast<double>(FLT_MAX))) : 0.0f;
-        }
-    }
+    detail::map_rebuilt_excess(color, rebuilt, before, n, s.where, s.order);
     // the shape: the image before the rebuild (the cleaned image plus what was removed)
     auto shape_row = [&](int y, double* row) {
+        auto put = [&](int x, int c, double v) {
+            row[static_cast<std::size_t>(x) * 3 + static_cast<std::size_t>(c)] = std::isfinite(v) && v > 0 ? v : 0.0;
+        };
         for (int x = 0; x < w; ++x)
-            for (int c = 0; c < 3; ++c) {
-                const std::size_t i = (static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)) * 3 + static_cast<std::size_t>(c);
-                const double v = color.load(x, y, c) + static_cast<double>(s.excess[i]);
-                row[static_cast<std::size_t>(x) * 3 + static_cast<std::size_t>(c)] = std::isfinite(v) && v > 0 ? v : 0.0;
-            }
+            for (int c = 0; c < 3; ++c) put(x, c, color.load(x, y, c));
+        for (const detail::excess_pixel* e = s.where.first(y); e != s.where.last(y); ++e)
+            for (int c = 0; c < 3; ++c) put(e->x, c, color.load(e->x, y, c) + e->v[c]);
     };
-    energy_model_rows(s.excess, shape_row, w, h, sigma, s, exec);
+    energy_model_mapped(shape_row, w, h, sigma, s, exec);
     // row-major, as over every pixel: the others' excess is +0 and adds nothing (excess_map)
     for (const detail::excess_pixel& e : s.where.pixels) t.removed += (e.v[0] + e.v[1] + e.v[2]) / 3.0;
     detail::energy_rows rows(s);

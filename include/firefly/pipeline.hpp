@@ -220,8 +220,8 @@ public:
                  (h.fix.capacity() + h.cross.capacity()) * sizeof(std::uint32_t) +
                  h.cross_values.capacity() * sizeof(double) + h.decision.capacity() +
                  h.band_counts.capacity() * sizeof(stddev_counts) + h.before.capacity() * sizeof(float) + h.added.capacity() +
-                 h.energy.bytes() + h.recon.bytes();
-        return n;
+                 h.recon.bytes();
+        return n + energy_.bytes();
     }
 
     // Cleans both halves in place and reports. mask_a / mask_b (optional, 1 channel, the
@@ -273,7 +273,6 @@ private:
         std::vector<stddev_counts> band_counts;  // the standard-deviation pass per row band
         std::vector<float> before;           // return_energy: colour of the pixels to rebuild
         std::vector<std::uint8_t> added;     // return_energy with a mask: light added here
-        energy_scratch energy;
         reconstruct_scratch recon;
     };
 
@@ -924,7 +923,7 @@ private:
             s.added.assign(mask.empty() ? 0 : s.label.size(), 0);
             const energy_totals t = return_energy_to_image(hb.color, s.fix.data(),
                                                            s.before.data(), s.fix.size(), s.decision.data(),
-                                                           energy_scales(options_.energy_sigma, options_.energy_coarse_sigma), s.energy, exec_,
+                                                           energy_scales(options_.energy_sigma, options_.energy_coarse_sigma), energy_, exec_,
                                                            mask.empty() ? nullptr : s.added.data());
             r.energy_removed = t.removed;
             r.energy_returned = t.returned;
@@ -1014,6 +1013,7 @@ private:
     std::vector<double> frame_log_p_;  // the one-half fireflies' p-values (log), for the frame's level
     std::vector<double> pair_log_p_;   // per pair and half: the p-value (log) of its excess; NaN: none
     std::vector<std::uint64_t> visit_, visit_tmp_;  // for_entries_by_row
+    energy_scratch energy_;            // return_energy: one for both halves, which take turns
     double frame_level_ = 0;           // log of the largest p-value the frame's decision keeps
 };
 
