@@ -136,6 +136,38 @@ TEST_CASE("a noisy highlight spot is kept as a cluster; the same pixel alone is 
     CHECK(hg.f.color[0][(21 * 64 + 21) * 3] < 5.0f);
 }
 
+TEST_CASE("a pixel of a highlight spot dimmer than the spot is judged at the spot's level", "[pipeline][highlight]") {
+    // A 3x3 spot at 30 (relative error 0.17: strict highlights) whose centre drew low in
+    // both halves (14 and 8, variance 200 each): relative error sqrt(400) / 22 = 0.91 at its
+    // own level, past even the cluster limit (0.8), yet 20 / 60 = 0.33 at the spot's. Next
+    // to the spot, two unrelated fireflies on one pixel: brighter than the spot, judged at
+    // their own level, rebuilt.
+    sim::frame f = flat(64, 48, 5);
+    auto put = [&](int half, int x, int y, float value, float variance) {
+        const std::size_t i = static_cast<std::size_t>(y * f.width + x);
+        for (int c = 0; c < 3; ++c) {
+            f.color[half][i * 3 + c] = value;
+            f.variance[half][i * 3 + c] = variance;
+        }
+    };
+    for (int y = 20; y < 23; ++y)
+        for (int x = 20; x < 23; ++x)
+            for (int half = 0; half < 2; ++half) put(half, x, y, 30.0f, 50.0f);
+    put(0, 21, 21, 14.0f, 200.0f);
+    put(1, 21, 21, 8.0f, 200.0f);
+    spike(f, 0, 23, 21, 300.0f);
+    spike(f, 1, 23, 21, 900.0f);
+    halves hv(f);
+    detector d;
+    const frame_report r = d.process(hv.h[0], hv.h[1]);
+    REQUIRE(r.error.ok());
+    CHECK(r.half[0].highlights == 9);
+    CHECK(hv.f.color[0][(21 * 64 + 21) * 3] == 14.0f);
+    CHECK(hv.f.color[1][(21 * 64 + 21) * 3] == 8.0f);
+    CHECK(hv.f.color[0][(21 * 64 + 23) * 3] < 100.0f);
+    CHECK(hv.f.color[1][(21 * 64 + 23) * 3] < 100.0f);
+}
+
 TEST_CASE("a firefly on top of a highlight is rebuilt in its half only", "[pipeline][highlight]") {
     sim::frame f = flat(64, 48, 12);
     for (int y = 29; y < 32; ++y)  // a 3x3 highlight spot, confident in both halves

@@ -602,11 +602,24 @@ private:
         std::uint8_t* lab[2] = {halves_[0].label.data(), halves_[1].label.data()};
         const highlight_options& ho = options_.highlight;
         const int w = a.color.width(), hgt = a.color.height();
+        // The spot's level: the mean of la + lb over the strict highlights among the 8 neighbours.
+        auto spot_sum = [&](int x, int y) {
+            double sum = 0;
+            int n = 0;
+            for (int yy = std::max(0, y - 1); yy <= std::min(hgt - 1, y + 1); ++yy)
+                for (int xx = std::max(0, x - 1); xx <= std::min(w - 1, x + 1); ++xx)
+                    if ((xx != x || yy != y) && (lab[0][index(xx, yy, w)] & strict_bit)) {
+                        sum += std::fabs(mean_colour(a.color, xx, yy) + mean_colour(b.color, xx, yy));
+                        ++n;
+                    }
+            return n ? sum / n : 0.0;
+        };
         auto decide_pair = [&](std::size_t j, bool cluster) -> int {  // 0 no, 1 strict, 2 cluster
             const std::uint32_t i = pairs_[j];
             const int x = static_cast<int>(i % static_cast<std::uint32_t>(w));
             const int y = static_cast<int>(i / static_cast<std::uint32_t>(w));
             const double la = mean_colour(a.color, x, y), lb = mean_colour(b.color, x, y);
+            const double spot = cluster ? spot_sum(x, y) : 0.0;
             const double va = reduced_variance(a.variance, x, y), vb = reduced_variance(b.variance, x, y);
             // A firefly may sit on top of a highlight in one half: that half then exceeds the
             // other by far more than the other's noise (and the frame's decision keeps it,
@@ -614,9 +627,9 @@ private:
             // halves held its value).
             const bool a_over = kept_by_frame(pair_log_p_[j * 2]);
             const bool b_over = kept_by_frame(pair_log_p_[j * 2 + 1]);
-            const bool kept = a_over   ? is_highlight(ho, lb, lb, vb, vb, calibration, cluster)
-                              : b_over ? is_highlight(ho, la, la, va, va, calibration, cluster)
-                                       : is_highlight(ho, la, lb, va, vb, calibration, cluster);
+            const bool kept = a_over   ? is_highlight(ho, lb, lb, vb, vb, calibration, cluster, spot)
+                              : b_over ? is_highlight(ho, la, la, va, va, calibration, cluster, spot)
+                                       : is_highlight(ho, la, lb, va, vb, calibration, cluster, spot);
             if (!kept) return 0;
             if (!a_over) lab[0][i] |= highlight_bit;
             if (!b_over) lab[1][i] |= highlight_bit;
