@@ -216,7 +216,7 @@ public:
             n += h.sd.capacity() * sizeof(float) + h.label.capacity() +
                  h.hist.bytes() + h.select_f.capacity() * sizeof(float) +
                  h.select.capacity() * sizeof(double) + h.order.capacity() * sizeof(std::uint32_t) +
-                 h.removed.capacity() * sizeof(double) + h.keys.capacity() * sizeof(std::uint64_t) +
+                 h.removed.capacity() * sizeof(double) + (h.keys.capacity() + h.keys_tmp.capacity()) * sizeof(std::uint64_t) +
                  (h.fix.capacity() + h.cross.capacity()) * sizeof(std::uint32_t) +
                  h.cross_values.capacity() * sizeof(double) + h.decision.capacity() +
                  h.band_counts.capacity() * sizeof(stddev_counts) + h.before.capacity() * sizeof(float) + h.added.capacity() +
@@ -261,6 +261,7 @@ private:
         std::vector<double> select;          // MAD selection scratch
         std::vector<std::uint32_t> order;    // ESD candidates, removal order
         std::vector<std::uint64_t> keys;     // sort keys for that order
+        std::vector<std::uint64_t> keys_tmp; // and the radix sort's scratch
         std::vector<double> removed;         // their standard deviations
         summary rest;                        // summary of the valid pixels never removed
         std::size_t valid = 0;
@@ -456,15 +457,17 @@ private:
         std::size_t rest_n = 0;
         detail::shifted_sums_below(sd, n, cut, med, s1, s2, rest_n, s.order);
         r.bound = s.order.size();
-        // Removal order: largest first, lower index first among equals. Sorting packed keys
-        // (the bits of a float >= 0 order like the float) avoids the indirection.
+        // Removal order: largest first, lower index first among equals. Packed keys (the bits
+        // of a float >= 0 order like the float), put in order by a stable radix sort of their
+        // high words: the list comes in index order, so equals keep it (std::sort's order of
+        // the whole keys).
         s.keys.resize(s.order.size());
         for (std::size_t j = 0; j < s.order.size(); ++j) {
             std::uint32_t bits;
             std::memcpy(&bits, &sd[s.order[j]], 4);
             s.keys[j] = (static_cast<std::uint64_t>(~bits) << 32) | s.order[j];
         }
-        std::sort(s.keys.begin(), s.keys.end());
+        detail::sort_by_high_word(s.keys, s.keys_tmp);
         for (std::size_t j = 0; j < s.order.size(); ++j) s.order[j] = static_cast<std::uint32_t>(s.keys[j]);
         // At most n - 2 steps: candidates beyond that rejoin the rest.
         const std::size_t m = std::min(s.order.size(), s.valid >= 2 ? s.valid - 2 : 0);
