@@ -142,24 +142,15 @@ TEST_CASE("a pixel of a highlight spot dimmer than the spot is judged at the spo
     // own level, past even the cluster limit (0.8), yet 20 / 60 = 0.33 at the spot's. Next
     // to the spot, two unrelated fireflies on one pixel: brighter than the spot, judged at
     // their own level, rebuilt.
-    sim::frame f = flat(64, 48, 5);
-    auto put = [&](int half, int x, int y, float value, float variance) {
-        const std::size_t i = static_cast<std::size_t>(y * f.width + x);
-        for (int c = 0; c < 3; ++c) {
-            f.color[half][i * 3 + c] = value;
-            f.variance[half][i * 3 + c] = variance;
-        }
-    };
+    halves hv(flat(64, 48, 5));
     for (int y = 20; y < 23; ++y)
         for (int x = 20; x < 23; ++x)
-            for (int half = 0; half < 2; ++half) put(half, x, y, 30.0f, 50.0f);
-    put(0, 21, 21, 14.0f, 200.0f);
-    put(1, 21, 21, 8.0f, 200.0f);
-    spike(f, 0, 23, 21, 300.0f);
-    spike(f, 1, 23, 21, 900.0f);
-    halves hv(f);
-    detector d;
-    const frame_report r = d.process(hv.h[0], hv.h[1]);
+            for (int half = 0; half < 2; ++half) hv.set(half, x, y, 30.0f, 50.0f);
+    hv.set(0, 21, 21, 14.0f, 200.0f);
+    hv.set(1, 21, 21, 8.0f, 200.0f);
+    spike(hv.f, 0, 23, 21, 300.0f);
+    spike(hv.f, 1, 23, 21, 900.0f);
+    const frame_report r = detector().process(hv.h[0], hv.h[1]);
     REQUIRE(r.error.ok());
     CHECK(r.half[0].highlights == 9);
     CHECK(hv.f.color[0][(21 * 64 + 21) * 3] == 14.0f);
