@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <memory>
 #include <vector>
 
 #include "catch.hpp"
@@ -137,26 +138,52 @@ TEST_CASE("a noisy highlight spot is kept as a cluster; the same pixel alone is 
 }
 
 TEST_CASE("a pixel of a highlight spot dimmer than the spot is judged at the spot's level", "[pipeline][highlight]") {
-    // A 3x3 spot at 30 (relative error 0.17: strict highlights) whose centre drew low in
-    // both halves (14 and 8, variance 200 each): relative error sqrt(400) / 22 = 0.91 at its
-    // own level, past even the cluster limit (0.8), yet 20 / 60 = 0.33 at the spot's. Next
-    // to the spot, two unrelated fireflies on one pixel: brighter than the spot, judged at
-    // their own level, rebuilt.
-    halves hv(flat(64, 48, 5));
-    for (int y = 20; y < 23; ++y)
-        for (int x = 20; x < 23; ++x)
-            for (int half = 0; half < 2; ++half) hv.set(half, x, y, 30.0f, 50.0f);
-    hv.set(0, 21, 21, 14.0f, 200.0f);
-    hv.set(1, 21, 21, 8.0f, 200.0f);
-    spike(hv.f, 0, 23, 21, 300.0f);
-    spike(hv.f, 1, 23, 21, 900.0f);
-    const frame_report r = detector().process(hv.h[0], hv.h[1]);
-    REQUIRE(r.error.ok());
-    CHECK(r.half[0].highlights == 9);
-    CHECK(hv.f.color[0][(21 * 64 + 21) * 3] == 14.0f);
-    CHECK(hv.f.color[1][(21 * 64 + 21) * 3] == 8.0f);
-    CHECK(hv.f.color[0][(21 * 64 + 23) * 3] < 100.0f);
-    CHECK(hv.f.color[1][(21 * 64 + 23) * 3] < 100.0f);
+    // A 3x3 spot (relative error 0.17: strict highlights) whose centre drew low in both halves
+    // (8 and 6, variance 100 each): relative error sqrt(200) / 14 = 1.01 at its own level,
+    // past even the cluster limit (0.8), yet 14 / 60 = 0.24 at the spot's, and its noise is
+    // the spot's (14.1 against 10, within 0.8 / 0.5 of it). Beside the spot, two unrelated
+    // fireflies on one pixel (one sample each: a standard error above their sum) carry their
+    // own noise and are judged at their own level.
+    auto frame = [](float spot, float spot_variance) {
+        auto hv = std::make_unique<halves>(flat(64, 48, 5));
+        for (int y = 20; y < 23; ++y)
+            for (int x = 20; x < 23; ++x)
+                for (int half = 0; half < 2; ++half) hv->set(half, x, y, spot, spot_variance);
+        hv->set(0, 23, 21, 300.0f, 4 * 300.0f * 300.0f);
+        hv->set(1, 23, 21, 900.0f, 4 * 900.0f * 900.0f);
+        return hv;
+    };
+    auto pixel = [](const halves& hv, int half, int x, int y) { return hv.f.color[half][hv.at(x, y) * 3]; };
+    {
+        auto hv = frame(30.0f, 50.0f);
+        hv->set(0, 21, 21, 8.0f, 100.0f);
+        hv->set(1, 21, 21, 6.0f, 100.0f);
+        const frame_report r = detector().process(hv->h[0], hv->h[1]);
+        REQUIRE(r.error.ok());
+        CHECK(r.half[0].highlights == 9);
+        CHECK(pixel(*hv, 0, 21, 21) == 8.0f);
+        CHECK(pixel(*hv, 1, 21, 21) == 6.0f);
+        CHECK(pixel(*hv, 0, 23, 21) < 100.0f);
+        CHECK(pixel(*hv, 1, 23, 21) < 100.0f);
+    }
+    {  // a spot far brighter than the two fireflies: its level does not carry them
+        auto hv = frame(3000.0f, 5000.0f);
+        const frame_report r = detector().process(hv->h[0], hv->h[1]);
+        REQUIRE(r.error.ok());
+        CHECK(r.half[0].highlights == 9);
+        CHECK(pixel(*hv, 0, 23, 21) < 100.0f);
+        CHECK(pixel(*hv, 1, 23, 21) < 100.0f);
+    }
+    {  // a firefly on the spot pixel next to them: the spot's level is the level it was judged at
+        auto hv = frame(30.0f, 50.0f);
+        hv->set(0, 22, 21, 30000.0f, 30000.0f * 30000.0f);
+        const frame_report r = detector().process(hv->h[0], hv->h[1]);
+        REQUIRE(r.error.ok());
+        CHECK(pixel(*hv, 0, 22, 21) < 100.0f);
+        CHECK(pixel(*hv, 1, 22, 21) == 30.0f);
+        CHECK(pixel(*hv, 0, 23, 21) < 100.0f);
+        CHECK(pixel(*hv, 1, 23, 21) < 100.0f);
+    }
 }
 
 TEST_CASE("a firefly on top of a highlight is rebuilt in its half only", "[pipeline][highlight]") {

@@ -254,7 +254,6 @@ struct excess_map {
     std::vector<excess_pixel> pixels;
     const excess_pixel* first(int y) const noexcept { return pixels.data() + start[static_cast<std::size_t>(y)]; }
     const excess_pixel* last(int y) const noexcept { return pixels.data() + start[static_cast<std::size_t>(y) + 1]; }
-    bool row(int y) const noexcept { return last(y) != first(y); }
     std::size_t bytes() const noexcept {
         return start.capacity() * sizeof(std::size_t) + pixels.capacity() * sizeof(excess_pixel);
     }
@@ -811,27 +810,27 @@ inline void coarse_model(const excess_map& where, int w, int h,
     const double fine2 = sum_sq(fine), coarse2 = width * sum_sq(tw);  // a cell's weight is each pixel's
     s.coarse_var_scale = (fine2 * fine2) / (coarse2 * coarse2);
 }
-}  // namespace detail
 
-// The model of the energy return for one frame, from the removed excess in s.where (see
-// excess_map) and the image whose 3x3 median shapes the return (3 channels, finite, >= 0; row
-// y written by shape_rows(y, out)): the profile and the nodes' factors in `s`, read back per
-// pixel by energy_at. sc: the Gaussians' widths in pixels.
+// The model of the energy return for one frame, from the removed excess already in s.where
+// (see excess_map) and the image whose 3x3 median shapes the return (3 channels, finite,
+// >= 0; row y written by shape_rows(y, out)): the profile and the nodes' factors in `s`, read
+// back per pixel by energy_at. sc: the Gaussians' widths in pixels.
 template <class ShapeRows>
 inline void energy_model_mapped(ShapeRows&& shape_rows, int w, int h, energy_scales sc, energy_scratch& s,
                                 const executor& exec) {
     const double sigma = sc.fine;
     const int r = std::max(1, static_cast<int>(std::ceil(3.0 * sigma)));
-    const detail::tap_weights taps[2] = {detail::make_taps(sigma, r, false), detail::make_taps(sigma, r, true)};
-    const int step = detail::node_step(sigma);
-    s.ax = detail::make_node_axis(w, step);
-    s.ay = detail::make_node_axis(h, step);
-    detail::median3x3_rows(shape_rows, s.profile, w, h, exec);
-    detail::energy_x_then_y(s.profile, s.where, w, h, s.ax, s.ay, taps, s, exec);
-    detail::energy_y_then_x(s.profile, s.where, w, h, s.ax, s.ay, taps, s, exec);
-    detail::coarse_model(s.where, w, h, sc, taps[0], s, exec);
-    detail::energy_factors(s);
+    const tap_weights taps[2] = {make_taps(sigma, r, false), make_taps(sigma, r, true)};
+    const int step = node_step(sigma);
+    s.ax = make_node_axis(w, step);
+    s.ay = make_node_axis(h, step);
+    median3x3_rows(shape_rows, s.profile, w, h, exec);
+    energy_x_then_y(s.profile, s.where, w, h, s.ax, s.ay, taps, s, exec);
+    energy_y_then_x(s.profile, s.where, w, h, s.ax, s.ay, taps, s, exec);
+    coarse_model(s.where, w, h, sc, taps[0], s, exec);
+    energy_factors(s);
 }
+}  // namespace detail
 
 // The same from the excess as a frame (3 interleaved channels, w x h, 0 where nothing was
 // removed; row y of the shape written by shape_rows, or held whole: energy_model).
@@ -839,7 +838,7 @@ template <class E, class ShapeRows>
 inline void energy_model_rows(const std::vector<E>& excess, ShapeRows&& shape_rows, int w, int h, energy_scales sc,
                               energy_scratch& s, const executor& exec) {
     detail::map_excess(excess, w, h, s.where, exec);
-    energy_model_mapped(shape_rows, w, h, sc, s, exec);
+    detail::energy_model_mapped(shape_rows, w, h, sc, s, exec);
 }
 
 inline void energy_model(const std::vector<double>& excess, const std::vector<double>& shape, int w, int h,
@@ -981,20 +980,25 @@ inline void map_rebuilt_excess(const image_view<C>& color, const std::uint32_t* 
                                std::size_t n, excess_map& m, std::vector<std::uint32_t>& order) {
     const int w = color.width(), h = color.height();
     const std::size_t np = color.pixel_count();
-    order.resize(n);
-    for (std::size_t e = 0; e < n; ++e) order[e] = static_cast<std::uint32_t>(e);
-    if (!std::is_sorted(rebuilt, rebuilt + n))
+    const bool sorted = std::is_sorted(rebuilt, rebuilt + n);  // as the detector's lists are
+    order.clear();
+    if (!sorted) {
+        order.resize(n);
+        for (std::size_t e = 0; e < n; ++e) order[e] = static_cast<std::uint32_t>(e);
         std::stable_sort(order.begin(), order.end(), [&](std::uint32_t i, std::uint32_t j) { return rebuilt[i] < rebuilt[j]; });
+    }
+    auto entry = [&](std::size_t j) { return sorted ? j : static_cast<std::size_t>(order[j]); };
     m.start.assign(static_cast<std::size_t>(h) + 1, 0);
     m.pixels.clear();
     for (std::size_t j = 0; j < n; ++j) {
-        const std::uint32_t e = order[j], p = rebuilt[e];
-        if (p >= np || (j + 1 < n && rebuilt[order[j + 1]] == p)) continue;
+        const std::size_t e = entry(j);
+        const std::uint32_t p = rebuilt[e];
+        if (p >= np || (j + 1 < n && rebuilt[entry(j + 1)] == p)) continue;
         const int x = static_cast<int>(p % static_cast<std::uint32_t>(w));
         const int y = static_cast<int>(p / static_cast<std::uint32_t>(w));
         float f[3];
         for (int c = 0; c < 3; ++c) {
-            const double d = static_cast<double>(before[static_cast<std::size_t>(e) * 3 + static_cast<std::size_t>(c)]) -
+            const double d = static_cast<double>(before[e * 3 + static_cast<std::size_t>(c)]) -
                              color.load(x, y, c);
             f[c] = std::isfinite(d) && d > 0 ? static_cast<float>(std::min(d, static_cast<double>(FLT_MAX))) : 0.0f;
         }
@@ -1029,7 +1033,7 @@ energy_totals return_energy_to_image(const image_view<C>& color, const std::uint
         for (const detail::excess_pixel* e = s.where.first(y); e != s.where.last(y); ++e)
             for (int c = 0; c < 3; ++c) put(e->x, c, color.load(e->x, y, c) + e->v[c]);
     };
-    energy_model_mapped(shape_row, w, h, sigma, s, exec);
+    detail::energy_model_mapped(shape_row, w, h, sigma, s, exec);
     // row-major, as over every pixel: the others' excess is +0 and adds nothing (excess_map)
     for (const detail::excess_pixel& e : s.where.pixels) t.removed += (e.v[0] + e.v[1] + e.v[2]) / 3.0;
     detail::energy_rows rows(s);

@@ -22,12 +22,13 @@
 // one among its 8 neighbours is held to the looser cluster_relative_error. This keeps
 // highlights at low sample counts, where even a real highlight's relative error passes 0.5
 // (c / sqrt(2N) for N samples per half of relative spread c). Next to pixels that pass the
-// strict limit (a spot whose level is known), the error is taken relative to the larger of the
-// pixel's own sum and its strict neighbours' mean sum (spot_sum): a spot's pixel that drew low
-// in both halves has a small sum and so a large error of its own, though its noise is the
-// spot's (at 16 samples per half and c = 2.5, 36 of 285 spot pixels failed at their own level,
-// 1 at the spot's); two fireflies on one pixel beside a spot are brighter than the spot and
-// are judged at their own level as before.
+// strict limit (a spot whose level is known; cluster pass only), a pixel whose standard error
+// is no larger than the noisiest of them has the spot's noise, and its error is taken relative
+// to the larger of its own |A + B| and their mean (highlight_spot): a spot's pixel that drew
+// low in both halves has a small sum and so a large error of its own (at 16 samples per half
+// and c = 2.5, 36 of 285 spot pixels failed at their own level, 2 at the spot's). Two
+// fireflies that met beside a spot carry their own noise, one sample each (a standard error
+// near their sum), far above a spot's many samples: judged at their own level as before.
 //
 // An outlier in ONE half only is a firefly in the paper. It must also stand out against the
 // other half, though: a firefly makes its half exceed the other by many times the noise,
@@ -126,12 +127,27 @@ private:
     std::vector<double> ratios_;
 };
 
+// sqrt(vA + vB) with the variances calibrated to variances of the mean: the standard error
+// of A + B, which the confident rule compares with |A + B|.
+inline double pair_standard_error(double va, double vb, double calibration) noexcept {
+    return std::sqrt((std::max(va, 0.0) + std::max(vb, 0.0)) * calibration);
+}
+
+// A highlight spot around a pixel, from its neighbours that passed the strict limit: the mean
+// of their |A + B| and the largest of their standard errors, each as they were judged (a half
+// carrying a firefly replaced by the other). A pixel no noisier than the spot is judged at
+// the spot's level when that is higher than its own (is_highlight).
+struct highlight_spot {
+    double sum = 0.0;
+    double se = 0.0;
+};
+
 // Decide one pixel that is an outlier in both halves. la, lb: mean colour of the pixel in
 // each half; va, vb: its reduced variance in each half; calibration: variance_calibration::factor();
-// in_cluster: another both-half outlier is among its 8 neighbours; spot_sum (cluster only): the
-// mean |A + B| of the strict highlights among them, a floor for |la + lb| (0: none).
+// in_cluster: another both-half outlier is among its 8 neighbours; spot (cluster only): what
+// the strict highlights among them say of the spot (none: zeros).
 inline bool is_highlight(const highlight_options& o, double la, double lb, double va, double vb,
-                         double calibration, bool in_cluster = false, double spot_sum = 0.0) noexcept {
+                         double calibration, bool in_cluster = false, highlight_spot spot = {}) noexcept {
     const bool want_agree =
         o.rule == highlight_rule::agree || o.rule == highlight_rule::confident_and_agree;
     const bool want_conf =
@@ -144,8 +160,10 @@ inline bool is_highlight(const highlight_options& o, double la, double lb, doubl
     if (want_conf) {
         const double limit = in_cluster ? std::max(o.max_relative_error, o.cluster_relative_error)
                                         : o.max_relative_error;
-        const double se = std::sqrt((std::max(va, 0.0) + std::max(vb, 0.0)) * calibration);
-        if (!(se <= limit * std::max(std::fabs(la + lb), spot_sum))) return false;
+        const double se = pair_standard_error(va, vb, calibration);
+        const bool spot_noise = se <= limit / o.max_relative_error * spot.se;  // (limit: cluster's)
+        const double level = spot_noise ? std::max(std::fabs(la + lb), spot.sum) : std::fabs(la + lb);
+        if (!(se <= limit * level)) return false;
     }
     return true;
 }

@@ -211,7 +211,7 @@ public:
         std::size_t n = cache_->bytes() + local_scratch_.bytes() + local_result_.bytes() + calibration_.bytes() +
                         pairs_.capacity() * sizeof(std::uint32_t) + pair_log_p_.capacity() * sizeof(double) +
                         (visit_.capacity() + visit_tmp_.capacity()) * sizeof(std::uint64_t) +
-                        frame_log_p_.capacity() * sizeof(double);
+                        frame_log_p_.capacity() * sizeof(double) + spots_.capacity() * sizeof(strict_pair);
         for (const auto& h : halves_)
             n += h.sd.capacity() * sizeof(float) + h.label.capacity() +
                  h.hist.bytes() + h.select_f.capacity() * sizeof(float) +
@@ -605,41 +605,48 @@ private:
         std::uint8_t* lab[2] = {halves_[0].label.data(), halves_[1].label.data()};
         const highlight_options& ho = options_.highlight;
         const int w = a.color.width(), hgt = a.color.height();
-        // The spot's level: the mean of la + lb over the strict highlights among the 8 neighbours.
-        auto spot_sum = [&](int x, int y) {
-            double sum = 0;
+        // The spot around (x, y): its strict neighbours as they were judged (spots_, by pixel).
+        auto spot_at = [&](int x, int y) {
+            highlight_spot spot;
             int n = 0;
             for (int yy = std::max(0, y - 1); yy <= std::min(hgt - 1, y + 1); ++yy)
-                for (int xx = std::max(0, x - 1); xx <= std::min(w - 1, x + 1); ++xx)
-                    if ((xx != x || yy != y) && (lab[0][index(xx, yy, w)] & strict_bit)) {
-                        sum += std::fabs(mean_colour(a.color, xx, yy) + mean_colour(b.color, xx, yy));
-                        ++n;
-                    }
-            return n ? sum / n : 0.0;
+                for (int xx = std::max(0, x - 1); xx <= std::min(w - 1, x + 1); ++xx) {
+                    const std::uint32_t q = static_cast<std::uint32_t>(index(xx, yy, w));
+                    if ((xx == x && yy == y) || !(lab[0][q] & strict_bit)) continue;
+                    const auto it = std::lower_bound(spots_.begin(), spots_.end(), q,
+                                                     [](const strict_pair& s, std::uint32_t p) { return s.pixel < p; });
+                    spot.sum += it->sum;
+                    spot.se = std::max(spot.se, it->se);
+                    ++n;
+                }
+            if (n) spot.sum /= n;
+            return spot;
         };
         auto decide_pair = [&](std::size_t j, bool cluster) -> int {  // 0 no, 1 strict, 2 cluster
             const std::uint32_t i = pairs_[j];
             const int x = static_cast<int>(i % static_cast<std::uint32_t>(w));
             const int y = static_cast<int>(i / static_cast<std::uint32_t>(w));
-            const double la = mean_colour(a.color, x, y), lb = mean_colour(b.color, x, y);
-            const double spot = cluster ? spot_sum(x, y) : 0.0;
-            const double va = reduced_variance(a.variance, x, y), vb = reduced_variance(b.variance, x, y);
+            double la = mean_colour(a.color, x, y), lb = mean_colour(b.color, x, y);
+            double va = reduced_variance(a.variance, x, y), vb = reduced_variance(b.variance, x, y);
             // A firefly may sit on top of a highlight in one half: that half then exceeds the
             // other by far more than the other's noise (and the frame's decision keeps it,
             // frame_level). It is rebuilt, and the other half is judged on its own (as if both
             // halves held its value).
             const bool a_over = kept_by_frame(pair_log_p_[j * 2]);
             const bool b_over = kept_by_frame(pair_log_p_[j * 2 + 1]);
-            const bool kept = a_over   ? is_highlight(ho, lb, lb, vb, vb, calibration, cluster, spot)
-                              : b_over ? is_highlight(ho, la, la, va, va, calibration, cluster, spot)
-                                       : is_highlight(ho, la, lb, va, vb, calibration, cluster, spot);
-            if (!kept) return 0;
+            if (a_over) la = lb, va = vb;
+            else if (b_over) lb = la, vb = va;
+            if (!is_highlight(ho, la, lb, va, vb, calibration, cluster, cluster ? spot_at(x, y) : highlight_spot{}))
+                return 0;
             if (!a_over) lab[0][i] |= highlight_bit;
             if (!b_over) lab[1][i] |= highlight_bit;
+            if (!cluster) spots_.push_back({i, std::fabs(la + lb), pair_standard_error(va, vb, calibration)});
             return cluster ? 2 : 1;
         };
+        spots_.clear();
         for (std::size_t j = 0; j < pairs_.size(); ++j)
             if (decide_pair(j, false) == 1) lab[0][pairs_[j]] |= strict_bit;
+        std::sort(spots_.begin(), spots_.end(), [](const strict_pair& p, const strict_pair& q) { return p.pixel < q.pixel; });
         // In a cluster: next to a strict highlight, or next to more pairs than the frame's
         // density of pairs explains (binomial tail below 1e-3 for the neighbours it has).
         int min_pairs[9];
@@ -1029,6 +1036,11 @@ private:
     std::vector<double> frame_log_p_;  // the one-half fireflies' p-values (log), for the frame's level
     std::vector<double> pair_log_p_;   // per pair and half: the p-value (log) of its excess; NaN: none
     std::vector<std::uint64_t> visit_, visit_tmp_;  // for_entries_by_row
+    struct strict_pair {               // a pair kept by the strict limit, as it was judged
+        std::uint32_t pixel;
+        double sum, se;
+    };
+    std::vector<strict_pair> spots_;   // decide_pairs: the strict highlights, by pixel
     energy_scratch energy_;            // return_energy: one for both halves, which take turns
     double frame_level_ = 0;           // log of the largest p-value the frame's decision keeps
 };
