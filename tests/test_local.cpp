@@ -644,8 +644,11 @@ TEST_CASE("local test: the neighbourhood's lower level", "[local]") {
             level[0][j] = lower[j];
             level[1][j] = 1e30;
         }
-        const double got = detail::neighbourhood_lower_level(level, w, h, 1, 1, 1, 1, pool);
+        double mad = -1;
+        const double got = detail::neighbourhood_lower_level(level, w, h, 1, 1, 1, 1, pool, &mad);
         CHECK(got == Approx(0.5 * (4e-3 + 5e-3)).epsilon(1e-6));  // 8 values: the two middle ones
+        // and their MAD: |x - 4.5e-3| = 3.5, 2.5, 1.5, 0.5, 0.5, 1.5, 2.5, 3.5 (e-3), median 2e-3
+        CHECK(mad == Approx(2e-3).epsilon(1e-6));
     }
     SECTION("neighbours with an unusable half are left out; too few give NaN") {
         for (std::size_t j = 0; j < 9; ++j)

@@ -509,7 +509,7 @@ static bool changed_by_detector(const sim::scene& scene, double alpha) {
 // confidence rule (highlight.hpp) is no test (pipeline.hpp, excess_log_p, noise_floor).
 TEST_CASE("pipeline: frames without fireflies are left alone in 1 - alpha of cases", "[pipeline][calibration]") {
     const double alpha = 0.1;
-    for (const int spp : {256, 64}) {
+    for (const int spp : {256, 64, 16}) {
         int frames = 0, touched = 0;
         for (std::uint64_t seed = 1; seed <= 40; ++seed)
             for (const double shape : {1.0, 4.0}) {

@@ -492,7 +492,7 @@ inline pooled_estimate pooled_relative_variance(const std::vector<float> (&rel_v
 // themselves is pulled up there), at the cost of a known bias on clean pixels (the caller's).
 // NaN when fewer than min_count neighbours have both halves usable.
 inline double neighbourhood_lower_level(const std::vector<double> (&level)[2], int w, int h, int x, int y,
-                                        int radius, int min_count, std::vector<float>& pool) {
+                                        int radius, int min_count, std::vector<float>& pool, double* mad_out = nullptr) {
     float* p = pool_room(pool, radius);
     const double *l0 = level[0].data(), *l1 = level[1].data();
     std::size_t count = 0;
@@ -503,6 +503,7 @@ inline double neighbourhood_lower_level(const std::vector<double> (&level)[2], i
     if (count < static_cast<std::size_t>(std::max(min_count, 1))) return std::numeric_limits<double>::quiet_NaN();
     double med = 0, mad = 0;
     median_and_mad(p, count, med, mad);
+    if (mad_out) *mad_out = mad;
     return med;
 }
 
