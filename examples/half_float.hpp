@@ -7,6 +7,7 @@
 
 #include <firefly/image_view.hpp>
 
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -61,7 +62,8 @@ inline const float* half16_table() {
     return table.data();
 }
 
-inline std::size_t half16_rows_converted = 0;  // how often the bulk hook ran (tests read it)
+inline std::atomic<std::size_t> half16_rows_converted{0};  // how often the bulk hook ran (tests read it;
+                                                           // rows convert on any thread)
 
 }  // namespace firefly_examples
 
