@@ -24,14 +24,13 @@
 // (c / sqrt(2N) for N samples per half of relative spread c). Next to pixels that pass the
 // strict limit (a spot whose level is known; cluster pass only), a pixel whose standard error
 // is within the cluster limit's allowance (cluster / strict limit, 0.8 / 0.5) of the noisiest
-// of them has the spot's noise, and its error is taken relative
-// to the larger of its own |A + B| and their mean (highlight_spot): a spot's pixel that drew
-// low in both halves has a small sum and so a large error of its own (at 16 samples per half
-// and c = 2.5, 36 of 285 spot pixels failed at their own level, 2 at the spot's). Two
-// fireflies that met beside a spot carry their own noise, one sample each (a standard error
-// near their sum), far above a spot's many samples: judged at their own level as before. A
-// spot without noise (a clamped emitter) or max_relative_error = 0 leaves every pixel at its
-// own level, as before the rule.
+// of them has the spot's noise, and its error is taken relative to the larger of its own
+// |A + B| and their mean (highlight_spot): a spot's pixel that drew low in both halves has a
+// small sum and so a large error of its own (at 16 samples per half and c = 2.5, 36 of 285
+// spot pixels failed at their own level, 2 at the spot's). Two fireflies that met beside a
+// spot carry their own noise, one sample each (a standard error near their sum), far above a
+// spot's many samples: judged at their own level as before. A spot without noise (a clamped
+// emitter) or max_relative_error = 0 leaves every pixel at its own level, as before the rule.
 //
 // An outlier in ONE half only is a firefly in the paper. It must also stand out against the
 // other half, though: a firefly makes its half exceed the other by many times the noise,

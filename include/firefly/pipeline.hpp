@@ -616,6 +616,7 @@ private:
                     if ((xx == x && yy == y) || !(lab[0][q] & strict_bit)) continue;
                     const auto it = std::lower_bound(spots_.begin(), spots_.end(), q,
                                                      [](const strict_pair& s, std::uint32_t p) { return s.pixel < p; });
+                    if (it == spots_.end() || it->pixel != q) continue;  // (every strict pixel has one)
                     spot.sum += it->sum;
                     spot.se = std::max(spot.se, it->se);
                     ++n;
