@@ -245,6 +245,19 @@ struct excess_pixel {
     double v[4];
 };
 
+// |e|^2 of one pixel's 3 channels, in double (written once: both orders square alike).
+template <class E>
+inline double squared(const E* e) noexcept {
+    const double a = e[0], b = e[1], c = e[2];
+    return a * a + b * b + c * c;
+}
+
+// The record of column x holding excess e (3 channels).
+template <class E>
+inline excess_pixel excess_at(int x, const E* e) noexcept {
+    return {x, {static_cast<double>(e[0]), static_cast<double>(e[1]), static_cast<double>(e[2]), squared(e)}};
+}
+
 // Where the removed excess is: the pixels where it is not 0, row after row (x ascending).
 // Elsewhere the M and V sums get terms of +-0, and a sum begun at +0 stays +0 bit for bit
 // under such terms (x + -0 = x; a sum reaches -0 only from -0 + -0): the sums run over these
@@ -284,13 +297,6 @@ struct energy_scratch {
 
 namespace detail {
 
-// |e|^2 of one pixel's 3 channels, in double (written once: both orders square alike).
-template <class E>
-inline double squared(const E* e) noexcept {
-    const double a = e[0], b = e[1], c = e[2];
-    return a * a + b * b + c * c;
-}
-
 // The excess_map of a frame's excess into m (its memory kept from frame to frame).
 template <class E>
 inline void map_excess(const std::vector<E>& excess, int w, int h, excess_map& m, const executor& exec) {
@@ -311,9 +317,7 @@ inline void map_excess(const std::vector<E>& excess, int w, int h, excess_map& m
         excess_pixel* o = m.pixels.data() + m.start[y];
         for (std::size_t x = 0; x < n1; ++x) {
             if (!counts(y, x)) continue;
-            const E* e = &excess[(y * n1 + x) * 3];
-            *o++ = {static_cast<int>(x),
-                    {static_cast<double>(e[0]), static_cast<double>(e[1]), static_cast<double>(e[2]), squared(e)}};
+            *o++ = excess_at(static_cast<int>(x), &excess[(y * n1 + x) * 3]);
         }
     });
 }
@@ -1003,7 +1007,7 @@ inline void map_rebuilt_excess(const image_view<C>& color, const std::uint32_t* 
             f[c] = std::isfinite(d) && d > 0 ? static_cast<float>(std::min(d, static_cast<double>(FLT_MAX))) : 0.0f;
         }
         if (f[0] == 0.0f && f[1] == 0.0f && f[2] == 0.0f) continue;  // as map_excess: no record
-        m.pixels.push_back({x, {static_cast<double>(f[0]), static_cast<double>(f[1]), static_cast<double>(f[2]), squared(f)}});
+        m.pixels.push_back(excess_at(x, f));
         ++m.start[static_cast<std::size_t>(y) + 1];
     }
     for (std::size_t y = 0; y < static_cast<std::size_t>(h); ++y) m.start[y + 1] += m.start[y];

@@ -610,17 +610,16 @@ private:
         auto spot_at = [&](int x, int y) {
             highlight_spot spot;
             int n = 0;
-            for (int yy = std::max(0, y - 1); yy <= std::min(hgt - 1, y + 1); ++yy)
-                for (int xx = std::max(0, x - 1); xx <= std::min(w - 1, x + 1); ++xx) {
-                    const std::uint32_t q = static_cast<std::uint32_t>(index(xx, yy, w));
-                    if ((xx == x && yy == y) || !(lab[0][q] & strict_bit)) continue;
-                    const auto it = std::lower_bound(spots_.begin(), spots_.end(), q,
-                                                     [](const strict_pair& s, std::uint32_t p) { return s.pixel < p; });
-                    if (it == spots_.end() || it->pixel != q) continue;  // (every strict pixel has one)
-                    spot.sum += it->sum;
-                    spot.se = std::max(spot.se, it->se);
-                    ++n;
-                }
+            detail::for_each_neighbour(w, hgt, x, y, 1, [&](std::size_t j) {
+                if (!(lab[0][j] & strict_bit)) return;
+                const std::uint32_t q = static_cast<std::uint32_t>(j);
+                const auto it = std::lower_bound(spots_.begin(), spots_.end(), q,
+                                                 [](const strict_pair& s, std::uint32_t p) { return s.pixel < p; });
+                if (it == spots_.end() || it->pixel != q) return;  // (every strict pixel has one)
+                spot.sum += it->sum;
+                spot.se = std::max(spot.se, it->se);
+                ++n;
+            });
             if (n) spot.sum /= n;
             return spot;
         };
@@ -659,15 +658,13 @@ private:
             const int x = static_cast<int>(i % static_cast<std::uint32_t>(w));
             const int y = static_cast<int>(i / static_cast<std::uint32_t>(w));
             int neighbours = 0, pairs = 0;
-            for (int yy = std::max(0, y - 1); yy <= std::min(hgt - 1, y + 1); ++yy)
-                for (int xx = std::max(0, x - 1); xx <= std::min(w - 1, x + 1); ++xx) {
-                    if (xx == x && yy == y) continue;
-                    const std::size_t j = index(xx, yy, w);
-                    if (lab[0][j] & strict_bit) return true;
-                    ++neighbours;
-                    pairs += (lab[0][j] & outlier_bit) && (lab[1][j] & outlier_bit);
-                }
-            return pairs >= min_pairs[neighbours];
+            bool strict = false;
+            detail::for_each_neighbour(w, hgt, x, y, 1, [&](std::size_t j) {
+                strict = strict || (lab[0][j] & strict_bit);
+                ++neighbours;
+                pairs += (lab[0][j] & outlier_bit) && (lab[1][j] & outlier_bit);
+            });
+            return strict || pairs >= min_pairs[neighbours];
         };
         if (ho.cluster_relative_error > ho.max_relative_error)
             for (std::size_t j = 0; j < pairs_.size(); ++j)
