@@ -547,6 +547,7 @@ private:
             if (lab1[i] & outlier_bit) pairs_.push_back(i);
             else single = true;
         }
+        std::sort(pairs_.begin(), pairs_.end());  // by pixel: decide_pairs counts them by window
         single |= rep.half[1].outliers > pairs_.size();
         rep.both_outliers = pairs_.size();
         if (single) decide_singles(a, b, rep);
@@ -648,8 +649,9 @@ private:
         for (std::size_t j = 0; j < pairs_.size(); ++j)
             if (decide_pair(j, false) == 1) lab[0][pairs_[j]] |= strict_bit;
         std::sort(spots_.begin(), spots_.end(), [](const strict_pair& p, const strict_pair& q) { return p.pixel < q.pixel; });
-        // In a cluster: next to a strict highlight, or next to more pairs than the frame's
-        // density of pairs explains (binomial tail below 1e-3 for the neighbours it has).
+        // In a cluster: next to a strict highlight, or next to more pairs than their density
+        // explains (binomial tail below 1e-3 for the neighbours it has): the frame's, or where
+        // pairs are denser, the 15x15 window's around the pixel (highlight.hpp).
         int min_pairs[9];
         const double q = static_cast<double>(pairs_.size()) /
                          static_cast<double>(std::max<std::size_t>(1, halves_[0].valid + halves_[1].valid) / 2 + 1);
@@ -664,7 +666,10 @@ private:
                 ++neighbours;
                 pairs += (lab[0][j] & outlier_bit) && (lab[1][j] & outlier_bit);
             });
-            return strict || pairs >= min_pairs[neighbours];
+            if (strict) return true;
+            if (pairs < min_pairs[neighbours]) return false;
+            const double local = detail::pair_density_around(pairs_, w, hgt, x, y, 7);  // pairs_: by pixel
+            return !(local > q) || pairs >= detail::binomial_tail_count(neighbours, local, 1e-3);
         };
         if (ho.cluster_relative_error > ho.max_relative_error)
             for (std::size_t j = 0; j < pairs_.size(); ++j)
