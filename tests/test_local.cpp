@@ -662,6 +662,63 @@ TEST_CASE("local test: the neighbourhood's lower level", "[local]") {
     }
 }
 
+TEST_CASE("local test: the neighbourhood's lower halves' noise", "[local]") {
+    const int w = 3, h = 3;
+    local_test_scratch s;
+    for (int half = 0; half < 2; ++half) {
+        s.level[half].assign(9, 1.0);
+        s.rel_var[half].assign(9, 0.25f);
+    }
+    std::vector<float> pool;
+    std::size_t n = 0;
+    SECTION("a firefly's half, with its level and its noise, is passed over") {
+        for (std::size_t j = 0; j < 9; ++j) {  // one half of every neighbour carries a firefly
+            const int hi = static_cast<int>(j % 2);
+            s.level[hi][j] = 1e30;
+            s.rel_var[hi][j] = 1.0f;
+        }
+        CHECK(detail::neighbourhood_lower_noise(s, w, h, 1, 1, 1, 1, pool, n) == 0.25);
+        CHECK(n == 8);
+    }
+    SECTION("the median over the neighbours, the centre left out") {
+        const float r[9] = {0.1f, 0.2f, 0.3f, 0.4f, 9.0f, 0.5f, 0.6f, 0.7f, 0.8f};
+        for (std::size_t j = 0; j < 9; ++j) {
+            s.rel_var[0][j] = r[j];
+            s.level[1][j] = 2.0;  // half 0 is the lower one
+        }
+        CHECK(detail::neighbourhood_lower_noise(s, w, h, 1, 1, 1, 1, pool, n) == Approx(0.45).epsilon(1e-6));
+        CHECK(n == 8);
+    }
+    SECTION("unusable neighbours are left out; too few give NaN") {
+        for (std::size_t j = 1; j < 8; ++j) s.level[1][j] = std::numeric_limits<double>::quiet_NaN();
+        CHECK(detail::neighbourhood_lower_noise(s, w, h, 1, 1, 1, 2, pool, n) == 0.25);  // pixels 0 and 8
+        CHECK(n == 2);
+        CHECK(std::isnan(detail::neighbourhood_lower_noise(s, w, h, 1, 1, 1, 3, pool, n)));
+    }
+}
+
+TEST_CASE("local test: a pixel's level against its neighbourhood's", "[local]") {
+    // F(4 m, 4 n m / pi): the pixel's mean over both halves (gamma 2 m) against a median of n
+    for (const double m : {0.5, 4.0, 64.0})
+        for (const double f : {1.5, 3.0, 30.0}) {
+            const double d2 = 4.0 / 3.141592653589793 * 8.0 * m;
+            INFO("m " << m << ", f " << f);
+            CHECK(detail::pixel_level_log_p(f, m, 8) == Approx(std::log(detail::f_upper_tail(f, 4.0 * m, d2))));
+            // monotone: brighter, or less noise, is less likely
+            CHECK(detail::pixel_level_log_p(f * 1.1, m, 8) < detail::pixel_level_log_p(f, m, 8));
+            CHECK(detail::pixel_level_log_p(f, m * 1.1, 8) < detail::pixel_level_log_p(f, m, 8));
+        }
+    CHECK(detail::pixel_level_log_p(1.0, 4.0, 8) == 0.0);  // not above the neighbourhood
+    CHECK(detail::pixel_level_log_p(0.2, 4.0, 8) == 0.0);
+    CHECK(detail::pixel_level_log_p(3.0, 0.0, 8) == 0.0);  // no noise model: nothing said
+    CHECK(detail::pixel_level_log_p(3.0, 4.0, 0) == 0.0);
+    // 1e30 times the neighbourhood at a million samples' noise: far below the smallest double,
+    // still a finite log
+    const double tiny = detail::pixel_level_log_p(1e30, 1e6, 8);
+    CHECK(std::isfinite(tiny));
+    CHECK(tiny < -1e4);
+}
+
 TEST_CASE("local test: levels and relative variances match local_pixel bit for bit", "[local]") {
     // Every special value local_pixel sorts out (NaN, Inf, -0, negative and zero variance,
     // black, negative colour), in pairs of neighbours and at odd widths, for 3 and 1 variance

@@ -507,6 +507,27 @@ inline double neighbourhood_lower_level(const std::vector<double> (&level)[2], i
     return med;
 }
 
+// The median over the neighbourhood (centre excluded) of the relative variance of each
+// neighbour's lower half (the half with the lower level): the neighbourhood's noise, clean
+// where fireflies are dense (a firefly lands in one half and lifts that half's r with its
+// level, so the median over both halves rises with them). NaN when fewer than min_count
+// neighbours have both halves usable; count: how many had.
+inline double neighbourhood_lower_noise(const local_test_scratch& s, int w, int h, int x, int y, int radius,
+                                        int min_count, std::vector<float>& pool, std::size_t& count) {
+    float* p = pool_room(pool, radius);
+    count = 0;
+    for_each_neighbour(w, h, x, y, radius, [&](std::size_t j) {
+        const double a = s.level[0][j], b = s.level[1][j];
+        if (!(a == a && b == b)) return;
+        const float r = s.rel_var[a <= b ? 0 : 1][j];
+        if (r == r) p[count++] = r;
+    });
+    if (count < static_cast<std::size_t>(std::max(min_count, 1))) return std::numeric_limits<double>::quiet_NaN();
+    double med = 0, mad = 0;
+    median_and_mad(p, count, med, mad);
+    return med;
+}
+
 // The statistic for the half whose level is hi against lo (hi > lo > 0), with r~ = r:
 // T = sqrt(m / 2) (sqrt(hi / lo) - sqrt(lo / hi)), m = 1 / r. The square roots are taken
 // separately so that 1e30 against 1e-3 stays finite.
@@ -587,6 +608,19 @@ inline double f_upper_tail(double f, double d1, double d2) noexcept {
     const double log_front = a * std::log(y) + b * std::log(y1) - (std::lgamma(a) + std::lgamma(b) - std::lgamma(a + b));
     if (y < (a + 1.0) / (a + b + 2.0)) return std::exp(log_front) * incbeta_cf(a, b, y) / a;
     return 1.0 - std::exp(log_front) * incbeta_cf(b, a, y1) / b;
+}
+
+// log P(level / around > f) for a pixel's mean over both halves, a gamma(2 m) mean when each
+// half is a gamma(m) mean (m = 1 / r), against a neighbourhood level `around` taken from the
+// median of n neighbours' lower halves: F(4 m, d2) with d2 = 2 (2 / pi) n m (a median of n
+// values is worth 2 n / pi of them). 0 (p = 1) for f <= 1; Paulson's normal point below the
+// smallest double.
+inline double pixel_level_log_p(double f, double m, std::size_t n) noexcept {
+    if (!(f > 1.0) || !(m > 0) || n == 0) return 0.0;
+    const double d1 = 4.0 * m, d2 = 4.0 / 3.141592653589793 * static_cast<double>(n) * m;
+    const double p = f_upper_tail(f, d1, d2);
+    if (p > 0) return std::log(std::min(p, 1.0));
+    return normal_log_upper_tail(paulson_z(f, d1, d2));
 }
 
 // Sum and count of the usable neighbours' levels in both halves (centre excluded), in scan

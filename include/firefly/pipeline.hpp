@@ -121,7 +121,8 @@ inline constexpr std::uint8_t firefly = 1;    // outlier rebuilt
 inline constexpr std::uint8_t highlight = 2;  // outlier in both halves, kept
 inline constexpr std::uint8_t nonfinite = 4;  // NaN/Inf repaired
 inline constexpr std::uint8_t consistent = 8; // outlier in one half, but within the noise of
-                                              // the other half: kept (min_excess_z)
+                                              // the other half: kept (min_excess_z); or in
+                                              // both, within its neighbourhood's noise
 inline constexpr std::uint8_t other_half = 16;// rebuilt from the other half's value at this
                                               // pixel (with firefly or nonfinite): the halves
                                               // are correlated here
@@ -209,7 +210,8 @@ public:
 
     std::size_t scratch_bytes() const noexcept {
         std::size_t n = cache_->bytes() + local_scratch_.bytes() + local_result_.bytes() + calibration_.bytes() +
-                        pairs_.capacity() * sizeof(std::uint32_t) + pair_log_p_.capacity() * sizeof(double) +
+                        pairs_.capacity() * sizeof(std::uint32_t) +
+                        (pair_log_p_.capacity() + pair_level_log_p_.capacity() + pair_family_.capacity()) * sizeof(double) +
                         (visit_.capacity() + visit_tmp_.capacity()) * sizeof(std::uint64_t) +
                         frame_log_p_.capacity() * sizeof(double) + spots_.capacity() * sizeof(strict_pair);
         for (const auto& h : halves_)
@@ -281,6 +283,8 @@ private:
         detail::pooled_estimate pooled;  // the local test's r~ at the pixel
         double around = 0;               // the neighbourhood's level (noise_floor)
         double spread = 0;               // its lower halves' MAD over their median
+        double lower_noise = std::numeric_limits<double>::quiet_NaN();  // pairs: the lower halves' r
+        std::size_t lower_count = 0;     // ... over this many neighbours
     };
 
     static constexpr int band_rows = 64;  // row bands of the full-frame passes: tasks for any pool
@@ -588,14 +592,28 @@ private:
         const half_buffer<C, V, A>* hb[2] = {&a, &b};
         const int w = a.color.width();
         pair_log_p_.assign(pairs_.size() * 2, std::numeric_limits<double>::quiet_NaN());
+        pair_level_log_p_.assign(pairs_.size(), -HUGE_VAL);  // unknown: the highlight rule alone
         if (!(options_.highlight.min_excess_z > 0)) return;
         for_entries_by_row(pairs_.data(), pairs_.size(), [&](std::size_t j, std::vector<float>& pool) {
             const int x = static_cast<int>(pairs_[j] % static_cast<std::uint32_t>(w));
             const int y = static_cast<int>(pairs_[j] / static_cast<std::uint32_t>(w));
-            const neighbourhood nb = neighbourhood_at(x, y, w, a.color.height(), pool);  // both halves'
+            const neighbourhood nb = neighbourhood_at(x, y, w, a.color.height(), pool, true);  // both halves'
             for (int h = 0; h < 2; ++h)
                 pair_log_p_[j * 2 + static_cast<std::size_t>(h)] = excess_log_p(hb, h, x, y, cal, nb);
+            pair_level_log_p_[j] = pair_level_log_p(a, b, x, y, nb);
         });
+    }
+
+    // Does the pair's level stand out from its neighbourhood (the p-value, log; -inf where the
+    // neighbourhood cannot tell)? Its mean over both halves against the neighbourhood's level
+    // (noise_floor's), each half a gamma mean of the neighbours' lower halves' noise
+    // (local_test.hpp: pixel_level_log_p).
+    template <class C, class V, class A>
+    double pair_level_log_p(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b, int x, int y,
+                            const neighbourhood& nb) const {
+        if (!(nb.lower_noise > 0) || !(nb.around > 0)) return -HUGE_VAL;
+        const double level = 0.5 * (mean_colour(a.color, x, y) + mean_colour(b.color, x, y));
+        return detail::pixel_level_log_p(level / nb.around, 1.0 / nb.lower_noise, nb.lower_count);
     }
 
     // Pixels that are outliers in both halves. A pair that passes the rule strictly is a
@@ -675,6 +693,37 @@ private:
             for (std::size_t j = 0; j < pairs_.size(); ++j)
                 if (!(lab[0][pairs_[j]] & strict_bit) && in_cluster(pairs_[j])) (void)decide_pair(j, true);
         for (const std::uint32_t i : pairs_) lab[0][i] &= static_cast<std::uint8_t>(~strict_bit);
+        keep_pairs_within_noise(lab);
+    }
+
+    // A pair that is no highlight is rebuilt only where its level stands out from its
+    // neighbourhood at the frame's level: Benjamini-Hochberg over the one-half decisions'
+    // p-values and these (fdr.hpp), or Bonferroni's over the tested pixel-halves where that is
+    // looser (a frame whose only fireflies met in pairs still has them rebuilt). Where
+    // it does not, its outlying standard deviations are the neighbourhood's noise, not two
+    // fireflies that met: both halves are kept (consistent). The highlight rule is a bound,
+    // not a test: at 4 samples per half of exponential samples an ordinary pixel's halves
+    // carry one sample each as often as not (simulated frames without fireflies: 0.046% of
+    // the clean pixel-halves rebuilt as pairs, 0.017% now). A firefly on a highlight (one half
+    // over the other) is decided as before.
+    void keep_pairs_within_noise(std::uint8_t* const (&lab)[2]) {
+        const std::size_t tested = std::max<std::size_t>(1, halves_[0].valid + halves_[1].valid);
+        auto judged = [&](std::size_t j) {  // no highlight, no firefly on one
+            const std::uint32_t i = pairs_[j];
+            return !((lab[0][i] | lab[1][i]) & highlight_bit) && !kept_by_frame(pair_log_p_[j * 2]) &&
+                   !kept_by_frame(pair_log_p_[j * 2 + 1]);
+        };
+        // the frame's family: the one-half decisions' p-values and these
+        pair_family_.assign(frame_log_p_.begin(), frame_log_p_.end());
+        for (std::size_t j = 0; j < pairs_.size(); ++j)
+            if (judged(j)) pair_family_.push_back(pair_level_log_p_[j]);
+        const double level = std::max(bh_log_threshold(pair_family_, tested, options_.alpha),
+                                      std::log(options_.alpha) - std::log(static_cast<double>(tested)));
+        for (std::size_t j = 0; j < pairs_.size(); ++j) {
+            if (!judged(j) || pair_level_log_p_[j] <= level) continue;
+            lab[0][pairs_[j]] |= consistent_bit;
+            lab[1][pairs_[j]] |= consistent_bit;
+        }
     }
 
     // Outliers of one half only: kept when they do not stand out against the other half.
@@ -825,7 +874,7 @@ private:
     // What the local test's levels say about the neighbourhood of (x, y), computed once for
     // both halves' excess_log_p: the pooled relative variance (nu NaN: none, or no local test)
     // and the neighbourhood's level with its bias undone (noise_floor).
-    neighbourhood neighbourhood_at(int x, int y, int w, int h, std::vector<float>& pool) const {
+    neighbourhood neighbourhood_at(int x, int y, int w, int h, std::vector<float>& pool, bool pair = false) const {
         const local_test_scratch& ls = local_scratch_;
         const std::size_t i = index(x, y, w);
         neighbourhood nb;
@@ -839,6 +888,9 @@ private:
                                                              (options_.local.min_neighbours + 1) / 2, pool, &mad);
         nb.spread = med > 0 ? mad / med : 0.0;
         nb.around = med * std::exp(std::min(0.5449521356 * std::sqrt(t) + 0.5 * t, 700.0));
+        if (pair)
+            nb.lower_noise = detail::neighbourhood_lower_noise(ls, w, h, x, y, options_.local.radius,
+                                                               (options_.local.min_neighbours + 1) / 2, pool, nb.lower_count);
         return nb;
     }
 
@@ -1053,6 +1105,8 @@ private:
     local_test_result local_result_;
     std::vector<double> frame_log_p_;  // the one-half fireflies' p-values (log), for the frame's level
     std::vector<double> pair_log_p_;   // per pair and half: the p-value (log) of its excess; NaN: none
+    std::vector<double> pair_level_log_p_;  // per pair: its level against its neighbourhood's
+    std::vector<double> pair_family_;  // keep_pairs_within_noise: the p-values its level comes from
     std::vector<std::uint64_t> visit_, visit_tmp_;  // for_entries_by_row
     struct strict_pair {               // a pair kept by the strict limit, as it was judged
         std::uint32_t pixel;
