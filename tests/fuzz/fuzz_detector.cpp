@@ -3,10 +3,11 @@
 // in one buffer, planar, separate buffers with padded and flipped strides), float and double,
 // with raw bit patterns among the values (NaN, Inf, -0, denormals, FLT_MAX).
 //
-// Asserts: no crash; pixels whose mask has neither the
-// firefly nor the nonfinite bit are bit-identical to the input (colour, variance, alpha);
-// alpha is never written; a frame whose inputs are all finite gives no NaN, and no pixel
-// whose input colour was finite comes out NaN.
+// Asserts: no crash; pixels whose mask has neither the firefly nor the nonfinite bit are
+// bit-identical to the input (colour, variance, alpha), except that the energy bit lets the
+// first three colour channels grow (the energy return only adds light); alpha is never
+// written; a frame whose inputs are all finite gives no NaN, and no pixel whose input colour
+// was finite comes out NaN.
 #include <firefly/firefly.hpp>
 #include <fuzzer/FuzzedDataProvider.h>
 
@@ -138,6 +139,7 @@ void check_frame(const frame_shape& f, const int (&nch)[3], half_storage<T> (&s)
                 const std::uint8_t m = mask[i][static_cast<std::size_t>(y * f.w + x)];
                 // A refused frame writes no mask, so it may change nothing.
                 const bool may_change = (m & (mask_bits::firefly | mask_bits::nonfinite)) != 0;
+                const bool may_grow = (m & mask_bits::energy) != 0;  // colour channels 0..2
                 bool pixel_finite = true;  // the input colour of this pixel
                 for (int c = 0; c < f.nc; ++c)
                     pixel_finite = pixel_finite && std::isfinite(static_cast<double>(*element(before[i], 0, x, sy, c)));
@@ -151,7 +153,8 @@ void check_frame(const frame_shape& f, const int (&nch)[3], half_storage<T> (&s)
                         const T now = *element(s[i], k, x, sy, c);
                         const T was = *element(before[i], k, x, sy, c);
                         const bool same = std::memcmp(&now, &was, sizeof(T)) == 0;
-                        if (!same && (k == 2 || !may_change)) {
+                        const bool grew = k == 0 && c < 3 && may_grow && now >= was;
+                        if (!same && (k == 2 || !(may_change || grew))) {
                             std::fprintf(stderr, "half %d pixel (%d, %d) image %d channel %d mask %d; frame: %s\n", i, x,
                                          y, k, c, m, r.error.message());
                             fail("an unmarked pixel changed");
