@@ -708,12 +708,20 @@ TEST_CASE("local test: a pixel's level against its neighbourhood's", "[local]") 
             CHECK(detail::pixel_level_log_p(f * 1.1, m, 8) < detail::pixel_level_log_p(f, m, 8));
             CHECK(detail::pixel_level_log_p(f, m * 1.1, 8) < detail::pixel_level_log_p(f, m, 8));
         }
+    // against an independent evaluation (mpmath, 30 digits): far in the tail too, where the
+    // p-value is below the smallest double
+    CHECK(detail::pixel_level_log_p(30.0, 4.0, 8) == Approx(-38.6436926).epsilon(1e-8));
+    CHECK(detail::pixel_level_log_p(3.0, 64.0, 8) == Approx(-65.8213951).epsilon(1e-8));
+    CHECK(detail::pixel_level_log_p(1e30, 4.0, 8) == Approx(-1374.389).epsilon(1e-5));
+    CHECK(detail::pixel_level_log_p(1e80, 4.0, 8) == Approx(-3719.783).epsilon(1e-5));
+    // above m = 1e4, Paulson's normal point (lgamma would cancel): still monotone, <= 0
+    CHECK(detail::pixel_level_log_p(1.0 + 1e-7, 1e14, 8) <= 0.0);
+    CHECK(detail::pixel_level_log_p(1.5, 2e4, 8) < detail::pixel_level_log_p(1.4, 2e4, 8));
     CHECK(detail::pixel_level_log_p(1.0, 4.0, 8) == 0.0);  // not above the neighbourhood
     CHECK(detail::pixel_level_log_p(0.2, 4.0, 8) == 0.0);
     CHECK(detail::pixel_level_log_p(3.0, 0.0, 8) == 0.0);  // no noise model: nothing said
     CHECK(detail::pixel_level_log_p(3.0, 4.0, 0) == 0.0);
-    // 1e30 times the neighbourhood at a million samples' noise: far below the smallest double,
-    // still a finite log
+    // 1e30 times the neighbourhood at a million samples' noise: a finite log
     const double tiny = detail::pixel_level_log_p(1e30, 1e6, 8);
     CHECK(std::isfinite(tiny));
     CHECK(tiny < -1e4);

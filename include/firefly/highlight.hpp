@@ -19,13 +19,13 @@
 // Clusters: a highlight is spatially coherent (a spot, a streak, a disk), while two unrelated
 // fireflies meeting on one pixel are an isolated coincidence; two such coincidences side by
 // side are rarer still (about (pA pB)^2 per pixel). So a both-half outlier next to a strict
-// highlight, or next to more both-half outliers than chance explains (a binomial tail below
-// 1e-3 over its 8 neighbours), is held to the looser cluster_relative_error. Chance is the
-// density of such pairs over the frame, or where they are denser, over the 15x15 window
-// around the pixel (outside its 3x3 block): where fireflies are dense, as in a caustic lit
-// by them, unrelated pairs meet side by side all the time (the simulated caustics: 36% of a
-// caustic's pixels hold one, and with the frame's density alone a caustic's pairs were kept
-// as a highlight: recall 0.83, relMSE 0.033; 0.87 and 0.029 with the window's). This keeps
+// highlight, or next to more both-half outliers than the frame's density of them explains (a
+// binomial tail below 1e-3 over its 8 neighbours), is held to the looser
+// cluster_relative_error. (Tried: the density of the 15x15 window around the pixel where that
+// is higher, since unrelated pairs meet side by side all the time where fireflies are dense,
+// as in a caustic lit by them: the simulated caustics 0.033 -> 0.029, but a wide noisy
+// highlight, every pixel a pair, then explains itself as chance: a 16x16 spot at relative
+// error 0.6 kept 24 of its 256 pixels.) This keeps
 // highlights at low sample counts, where even a real highlight's relative error passes 0.5
 // (c / sqrt(2N) for N samples per half of relative spread c). Next to pixels that pass the
 // strict limit (a spot whose level is known; cluster pass only), a pixel whose standard error
@@ -107,26 +107,6 @@ inline int binomial_tail_count(int n, double q, double p) noexcept {
         tail += term;
     }
     return 0;
-}
-
-// The share of pixels holding a pair (an outlier in both halves) in the (2 r + 1)^2 window
-// around (x, y) outside its 3x3 block, the window clipped to the w x h frame; `pairs` are
-// the pairs' pixel indices (y w + x) in ascending order. 0 when no pixel is left.
-inline double pair_density_around(const std::vector<std::uint32_t>& pairs, int w, int h, int x, int y,
-                                  int r) noexcept {
-    const int x0 = std::max(0, x - r), x1 = std::min(w - 1, x + r);
-    const int y0 = std::max(0, y - r), y1 = std::min(h - 1, y + r);
-    const int bx0 = std::max(0, x - 1), bx1 = std::min(w - 1, x + 1);
-    const int by0 = std::max(0, y - 1), by1 = std::min(h - 1, y + 1);
-    auto count = [&](int row, int a, int b) {  // pairs in pixels a..b of one row
-        const std::uint32_t first = static_cast<std::uint32_t>(row) * static_cast<std::uint32_t>(w);
-        const auto lo = std::lower_bound(pairs.begin(), pairs.end(), first + static_cast<std::uint32_t>(a));
-        return std::upper_bound(lo, pairs.end(), first + static_cast<std::uint32_t>(b)) - lo;
-    };
-    std::ptrdiff_t n = 0;
-    for (int yy = y0; yy <= y1; ++yy) n += count(yy, x0, x1) - (yy >= by0 && yy <= by1 ? count(yy, bx0, bx1) : 0);
-    const long area = static_cast<long>(x1 - x0 + 1) * (y1 - y0 + 1) - static_cast<long>(bx1 - bx0 + 1) * (by1 - by0 + 1);
-    return area > 0 ? static_cast<double>(n) / static_cast<double>(area) : 0.0;
 }
 }  // namespace detail
 

@@ -510,8 +510,9 @@ inline double neighbourhood_lower_level(const std::vector<double> (&level)[2], i
 // The median over the neighbourhood (centre excluded) of the relative variance of each
 // neighbour's lower half (the half with the lower level): the neighbourhood's noise, clean
 // where fireflies are dense (a firefly lands in one half and lifts that half's r with its
-// level, so the median over both halves rises with them). NaN when fewer than min_count
-// neighbours have both halves usable; count: how many had.
+// level, so the median over both halves rises with them; of two halves at one level, the
+// smaller r). NaN when fewer than min_count neighbours count; count: how many did (both
+// halves' levels usable and the lower half's r).
 inline double neighbourhood_lower_noise(const local_test_scratch& s, int w, int h, int x, int y, int radius,
                                         int min_count, std::vector<float>& pool, std::size_t& count) {
     float* p = pool_room(pool, radius);
@@ -519,7 +520,7 @@ inline double neighbourhood_lower_noise(const local_test_scratch& s, int w, int 
     for_each_neighbour(w, h, x, y, radius, [&](std::size_t j) {
         const double a = s.level[0][j], b = s.level[1][j];
         if (!(a == a && b == b)) return;
-        const float r = s.rel_var[a <= b ? 0 : 1][j];
+        const float r = a < b ? s.rel_var[0][j] : b < a ? s.rel_var[1][j] : std::min(s.rel_var[0][j], s.rel_var[1][j]);
         if (r == r) p[count++] = r;
     });
     if (count < static_cast<std::size_t>(std::max(min_count, 1))) return std::numeric_limits<double>::quiet_NaN();
@@ -610,17 +611,26 @@ inline double f_upper_tail(double f, double d1, double d2) noexcept {
     return 1.0 - std::exp(log_front) * incbeta_cf(b, a, y1) / b;
 }
 
+// log P(F > f), f_upper_tail's continued fractions kept in logs: exact far below the
+// smallest double (1e30 times the level at m = 4: -1374, where Paulson's point says -94).
+inline double f_log_upper_tail(double f, double d1, double d2) noexcept {
+    const double a = 0.5 * d2, b = 0.5 * d1;
+    const double y = d2 / (d2 + d1 * f), y1 = d1 * f / (d2 + d1 * f);
+    const double log_front = a * std::log(y) + b * std::log(y1) - (std::lgamma(a) + std::lgamma(b) - std::lgamma(a + b));
+    if (y < (a + 1.0) / (a + b + 2.0)) return log_front + std::log(incbeta_cf(a, b, y) / a);
+    return std::log1p(-std::exp(log_front) * incbeta_cf(b, a, y1) / b);
+}
+
 // log P(level / around > f) for a pixel's mean over both halves, a gamma(2 m) mean when each
 // half is a gamma(m) mean (m = 1 / r), against a neighbourhood level `around` taken from the
 // median of n neighbours' lower halves: F(4 m, d2) with d2 = 2 (2 / pi) n m (a median of n
-// values is worth 2 n / pi of them). 0 (p = 1) for f <= 1; Paulson's normal point below the
-// smallest double.
+// values is worth 2 n / pi of them). 0 (p = 1) for f <= 1 or no m; above m = 1e4 the F is
+// near normal and lgamma would cancel: Paulson's normal point, as spatial_score.
 inline double pixel_level_log_p(double f, double m, std::size_t n) noexcept {
     if (!(f > 1.0) || !(m > 0) || n == 0) return 0.0;
     const double d1 = 4.0 * m, d2 = 4.0 / 3.141592653589793 * static_cast<double>(n) * m;
-    const double p = f_upper_tail(f, d1, d2);
-    if (p > 0) return std::log(std::min(p, 1.0));
-    return normal_log_upper_tail(paulson_z(f, d1, d2));
+    if (m > 1e4) return normal_log_upper_tail(paulson_z(f, d1, d2));
+    return std::min(f_log_upper_tail(f, d1, d2), 0.0);
 }
 
 // Sum and count of the usable neighbours' levels in both halves (centre excluded), in scan

@@ -143,7 +143,8 @@ struct half_report {
     std::size_t local = 0;              // of those, flagged by the local test only
     std::size_t highlights = 0;         // outliers kept (outlier in both halves)
     std::size_t consistent = 0;         // outliers kept (within the other half's noise, or
-                                        // not kept by the frame's decision: frame_kept)
+                                        // not kept by the frame's decision: frame_kept; pairs
+                                        // within their neighbourhood's noise)
     std::size_t frame_kept = 0;         // one-half outliers the frame's decision kept (fdr.hpp)
     std::size_t fireflies = 0;          // outliers to rebuild (rebuilt unless reconstruct = false)
     std::size_t repaired = 0;           // non-finite pixels rebuilt
@@ -551,7 +552,7 @@ private:
             if (lab1[i] & outlier_bit) pairs_.push_back(i);
             else single = true;
         }
-        std::sort(pairs_.begin(), pairs_.end());  // by pixel: decide_pairs counts them by window
+        std::sort(pairs_.begin(), pairs_.end());  // by pixel: no decision depends on the order
         single |= rep.half[1].outliers > pairs_.size();
         rep.both_outliers = pairs_.size();
         if (single) decide_singles(a, b, rep);
@@ -605,14 +606,19 @@ private:
     }
 
     // Does the pair's level stand out from its neighbourhood (the p-value, log; -inf where the
-    // neighbourhood cannot tell)? Its mean over both halves against the neighbourhood's level
-    // (noise_floor's), each half a gamma mean of the neighbours' lower halves' noise
-    // (local_test.hpp: pixel_level_log_p).
+    // neighbourhood cannot tell, and the highlight rule alone decides)? Its mean over both
+    // halves against the neighbourhood's level (noise_floor's), each half a gamma mean of the
+    // neighbours' lower halves' noise (local_test.hpp: pixel_level_log_p). The gamma model
+    // needs a positive level (a filter's negative lobe is not a gamma mean) and a relative
+    // variance of the mean within what non-negative samples give (at most 1 a channel, 3 for
+    // one coloured sample carrying the pixel: above, the variance is not that of the mean).
     template <class C, class V, class A>
     double pair_level_log_p(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b, int x, int y,
                             const neighbourhood& nb) const {
-        if (!(nb.lower_noise > 0) || !(nb.around > 0)) return -HUGE_VAL;
         const double level = 0.5 * (mean_colour(a.color, x, y) + mean_colour(b.color, x, y));
+        if (!(nb.lower_noise > 0 && nb.lower_noise <= 3.0) || !(nb.around > 0) || !(level > 0) ||
+            !std::isfinite(level))
+            return -HUGE_VAL;
         return detail::pixel_level_log_p(level / nb.around, 1.0 / nb.lower_noise, nb.lower_count);
     }
 
@@ -667,9 +673,8 @@ private:
         for (std::size_t j = 0; j < pairs_.size(); ++j)
             if (decide_pair(j, false) == 1) lab[0][pairs_[j]] |= strict_bit;
         std::sort(spots_.begin(), spots_.end(), [](const strict_pair& p, const strict_pair& q) { return p.pixel < q.pixel; });
-        // In a cluster: next to a strict highlight, or next to more pairs than their density
-        // explains (binomial tail below 1e-3 for the neighbours it has): the frame's, or where
-        // pairs are denser, the 15x15 window's around the pixel (highlight.hpp).
+        // In a cluster: next to a strict highlight, or next to more pairs than the frame's
+        // density of pairs explains (binomial tail below 1e-3 for the neighbours it has).
         int min_pairs[9];
         const double q = static_cast<double>(pairs_.size()) /
                          static_cast<double>(std::max<std::size_t>(1, halves_[0].valid + halves_[1].valid) / 2 + 1);
@@ -684,10 +689,7 @@ private:
                 ++neighbours;
                 pairs += (lab[0][j] & outlier_bit) && (lab[1][j] & outlier_bit);
             });
-            if (strict) return true;
-            if (pairs < min_pairs[neighbours]) return false;
-            const double local = detail::pair_density_around(pairs_, w, hgt, x, y, 7);  // pairs_: by pixel
-            return !(local > q) || pairs >= detail::binomial_tail_count(neighbours, local, 1e-3);
+            return strict || pairs >= min_pairs[neighbours];
         };
         if (ho.cluster_relative_error > ho.max_relative_error)
             for (std::size_t j = 0; j < pairs_.size(); ++j)
@@ -697,15 +699,14 @@ private:
     }
 
     // A pair that is no highlight is rebuilt only where its level stands out from its
-    // neighbourhood at the frame's level: Benjamini-Hochberg over the one-half decisions'
-    // p-values and these (fdr.hpp), or Bonferroni's over the tested pixel-halves where that is
-    // looser (a frame whose only fireflies met in pairs still has them rebuilt). Where
-    // it does not, its outlying standard deviations are the neighbourhood's noise, not two
-    // fireflies that met: both halves are kept (consistent). The highlight rule is a bound,
+    // neighbourhood at the level of Benjamini-Hochberg over the frame's one-half decisions'
+    // p-values and these (fdr.hpp; the one-half decisions keep their own level, frame_level).
+    // Where it does not, its outlying standard deviations are the neighbourhood's noise, not
+    // two fireflies that met: both halves are kept (consistent). The highlight rule is a bound,
     // not a test: at 4 samples per half of exponential samples an ordinary pixel's halves
     // carry one sample each as often as not (simulated frames without fireflies: 0.046% of
-    // the clean pixel-halves rebuilt as pairs, 0.017% now). A firefly on a highlight (one half
-    // over the other) is decided as before.
+    // the clean pixel-halves rebuilt as pairs, 0.024% now). A firefly on a highlight (one half
+    // over the other) is decided as before; a pair whose neighbourhood cannot tell is rebuilt.
     void keep_pairs_within_noise(std::uint8_t* const (&lab)[2]) {
         const std::size_t tested = std::max<std::size_t>(1, halves_[0].valid + halves_[1].valid);
         auto judged = [&](std::size_t j) {  // no highlight, no firefly on one
@@ -715,12 +716,16 @@ private:
         };
         // the frame's family: the one-half decisions' p-values and these
         pair_family_.assign(frame_log_p_.begin(), frame_log_p_.end());
+        bool any = false;
         for (std::size_t j = 0; j < pairs_.size(); ++j)
-            if (judged(j)) pair_family_.push_back(pair_level_log_p_[j]);
-        const double level = std::max(bh_log_threshold(pair_family_, tested, options_.alpha),
-                                      std::log(options_.alpha) - std::log(static_cast<double>(tested)));
+            if (judged(j) && pair_level_log_p_[j] != -HUGE_VAL) {  // tested: -inf is "cannot tell"
+                pair_family_.push_back(pair_level_log_p_[j]);
+                any = true;
+            }
+        if (!any) return;
+        const double level = bh_log_threshold(pair_family_, tested, options_.alpha);
         for (std::size_t j = 0; j < pairs_.size(); ++j) {
-            if (!judged(j) || pair_level_log_p_[j] <= level) continue;
+            if (!judged(j) || pair_level_log_p_[j] == -HUGE_VAL || !(pair_level_log_p_[j] > level)) continue;
             lab[0][pairs_[j]] |= consistent_bit;
             lab[1][pairs_[j]] |= consistent_bit;
         }
