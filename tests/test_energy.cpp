@@ -156,10 +156,27 @@ TEST_CASE("energy return: exact at the nodes, close between them", "[energy]") {
     }
 }
 
+TEST_CASE("energy return: one scratch over frames of other shapes gives a fresh scratch's bits", "[energy][invariant]") {
+    // the sums' order follows the shape (longer axis first, both on a square): nothing of a
+    // frame of another shape or order may carry over; 1 to 3 pixel sides included
+    const int shapes[][2] = {{37, 23}, {23, 37}, {23, 23}, {40, 1}, {1, 40}, {40, 3}, {3, 40}, {37, 23}};
+    energy_scratch reused;
+    for (const energy_scales sigma : {energy_scales(3.0, 12.0), energy_scales(2.0)})
+        for (const auto& sh : shapes) {
+            const energy_case e(sh[0], sh[1], 5);
+            std::vector<double> a, b;
+            energy_scratch fresh;
+            energy_return(e.excess, e.shape, sh[0], sh[1], sigma, a, reused, executor{});
+            energy_return(e.excess, e.shape, sh[0], sh[1], sigma, b, fresh, executor::threads(2));
+            INFO(sh[0] << "x" << sh[1] << ", sigma " << sigma.fine << " / " << sigma.coarse);
+            CHECK(std::memcmp(a.data(), b.data(), a.size() * sizeof(double)) == 0);
+        }
+}
+
 TEST_CASE("energy return: flipped and transposed frames give the same bits", "[energy][invariant]") {
     for (const energy_scales sigma : {energy_scales(3.0), energy_scales(8.0), energy_scales(3.0, 12.0), energy_scales(2.0, 7.0)})
-        for (const int w : {37, 38, 23}) {  // longer along x (x first), square (both orders)
-            const int h = 23;
+        for (const int w : {37, 38, 23, 40}) {  // longer along x (x first), square (both orders)
+            const int h = w == 40 ? 3 : 23;    // and a side shorter than the Gaussian's reach
             const energy_case e(w, h, 9);
             // the 8 symmetries as maps from output (x, y) in a frame of size (W, H) to the input
             for (int sym = 1; sym < 8; ++sym) {

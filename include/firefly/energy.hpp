@@ -749,7 +749,8 @@ inline double coarse_trust(const double* r, const double* c, double var_scale) n
     return std::isfinite(z) ? std::clamp(3.0 - z, 0.0, 1.0) : 0.0;
 }
 
-// The factor each node gives its channels, from the mean of the two orders' sums: the fine
+// The factor each node gives its channels, from the sums in sum_order_for's order (both
+// orders' mean on a square frame): the fine
 // scale's shrunk ratio, or the coarse scale's where the fine sums cannot tell them apart.
 inline void energy_factors(energy_scratch& s) {
     const std::size_t nx = static_cast<std::size_t>(s.ax.count), ny = static_cast<std::size_t>(s.ay.count);
@@ -758,7 +759,7 @@ inline void energy_factors(energy_scratch& s) {
         for (std::size_t j = 0; j < nx; ++j) {
             const std::size_t n = i * nx + j;
             double r[record], f[3];
-            for (int k = 0; k < record; ++k) r[k] = s.xy[n * record + k];  // both orders' mean
+            for (int k = 0; k < record; ++k) r[k] = s.xy[n * record + k];  // sum_order_for's sums
             shrunk_ratio(r, f);
             if (!s.coarse.empty()) {
                 double c[record], fc[3];

@@ -140,6 +140,8 @@ void check_frame(const frame_shape& f, const int (&nch)[3], half_storage<T> (&s)
                 // A refused frame writes no mask, so it may change nothing.
                 const bool may_change = (m & (mask_bits::firefly | mask_bits::nonfinite)) != 0;
                 const bool may_grow = (m & mask_bits::energy) != 0;  // colour channels 0..2
+                if (may_grow && f.alpha && !(static_cast<double>(*element(before[i], 2, x, sy, 0)) > 0))
+                    fail("light added to a pixel with alpha <= 0");
                 bool pixel_finite = true;  // the input colour of this pixel
                 for (int c = 0; c < f.nc; ++c)
                     pixel_finite = pixel_finite && std::isfinite(static_cast<double>(*element(before[i], 0, x, sy, c)));
@@ -153,7 +155,8 @@ void check_frame(const frame_shape& f, const int (&nch)[3], half_storage<T> (&s)
                         const T now = *element(s[i], k, x, sy, c);
                         const T was = *element(before[i], k, x, sy, c);
                         const bool same = std::memcmp(&now, &was, sizeof(T)) == 0;
-                        const bool grew = k == 0 && c < 3 && may_grow && now >= was;
+                        const bool grew = k == 0 && c < 3 && may_grow && now >= was &&
+                                          std::isfinite(static_cast<double>(now));  // light added, finite
                         if (!same && (k == 2 || !(may_change || grew))) {
                             std::fprintf(stderr, "half %d pixel (%d, %d) image %d channel %d mask %d; frame: %s\n", i, x,
                                          y, k, c, m, r.error.message());
