@@ -94,8 +94,9 @@ struct energy_case {
         for (double& v : shape) v = 0.2 + u(rng);
         for (int i = 0; i < w * h / 6; ++i) {
             const bool patch = i % 2 == 0;  // half of them in a patch around (w / 3, h / 2)
-            const int x = patch ? w / 3 + static_cast<int>(u(rng) * 9) - 4 : static_cast<int>(u(rng) * w);
-            const int y = patch ? h / 2 + static_cast<int>(u(rng) * 9) - 4 : static_cast<int>(u(rng) * h);
+            int x = patch ? w / 3 + static_cast<int>(u(rng) * 9) - 4 : static_cast<int>(u(rng) * w);
+            int y = patch ? h / 2 + static_cast<int>(u(rng) * 9) - 4 : static_cast<int>(u(rng) * h);
+            x = std::clamp(x, 0, w - 1), y = std::clamp(y, 0, h - 1);  // frames narrower than the patch
             for (int c = 0; c < 3; ++c) excess[static_cast<std::size_t>(y * w + x) * 3 + static_cast<std::size_t>(c)] = 1.0 + 9.0 * u(rng);
         }
     }
