@@ -552,7 +552,6 @@ private:
             if (lab1[i] & outlier_bit) pairs_.push_back(i);
             else single = true;
         }
-        std::sort(pairs_.begin(), pairs_.end());  // by pixel: no decision depends on the order
         single |= rep.half[1].outliers > pairs_.size();
         rep.both_outliers = pairs_.size();
         if (single) decide_singles(a, b, rep);
