@@ -486,6 +486,25 @@ inline pooled_estimate pooled_relative_variance(const std::vector<float> (&rel_v
     return e;
 }
 
+// The median (and MAD) over the neighbourhood (centre excluded) of value(j), a float per
+// neighbour j that counts (NaN: it does not); NaN when fewer than min_count count. count: how
+// many did.
+template <class Value>
+inline double neighbour_median(int w, int h, int x, int y, int radius, int min_count, std::vector<float>& pool,
+                               Value&& value, std::size_t& count, double* mad_out = nullptr) {
+    float* p = pool_room(pool, radius);
+    count = 0;
+    for_each_neighbour(w, h, x, y, radius, [&](std::size_t j) {
+        const float v = value(j);
+        if (v == v) p[count++] = v;
+    });
+    if (count < static_cast<std::size_t>(std::max(min_count, 1))) return std::numeric_limits<double>::quiet_NaN();
+    double med = 0, mad = 0;
+    median_and_mad(p, count, med, mad);
+    if (mad_out) *mad_out = mad;
+    return med;
+}
+
 // The median over the neighbourhood (centre excluded) of each neighbour's lower half level
 // (mean colour): a firefly lands in one half of a pixel, rarely in both, so the lower half
 // is clean where a quarter of the neighbours' halves carry one (a median over the halves
@@ -493,18 +512,12 @@ inline pooled_estimate pooled_relative_variance(const std::vector<float> (&rel_v
 // NaN when fewer than min_count neighbours have both halves usable.
 inline double neighbourhood_lower_level(const std::vector<double> (&level)[2], int w, int h, int x, int y,
                                         int radius, int min_count, std::vector<float>& pool, double* mad_out = nullptr) {
-    float* p = pool_room(pool, radius);
     const double *l0 = level[0].data(), *l1 = level[1].data();
     std::size_t count = 0;
-    for_each_neighbour(w, h, x, y, radius, [&](std::size_t j) {
+    return neighbour_median(w, h, x, y, radius, min_count, pool, [&](std::size_t j) {
         const double a = l0[j], b = l1[j];
-        if (a == a && b == b) p[count++] = static_cast<float>(std::min(a, b));
-    });
-    if (count < static_cast<std::size_t>(std::max(min_count, 1))) return std::numeric_limits<double>::quiet_NaN();
-    double med = 0, mad = 0;
-    median_and_mad(p, count, med, mad);
-    if (mad_out) *mad_out = mad;
-    return med;
+        return a == a && b == b ? static_cast<float>(std::min(a, b)) : std::numeric_limits<float>::quiet_NaN();
+    }, count, mad_out);
 }
 
 // The median over the neighbourhood (centre excluded) of the relative variance of each
@@ -515,18 +528,11 @@ inline double neighbourhood_lower_level(const std::vector<double> (&level)[2], i
 // halves' levels usable and the lower half's r).
 inline double neighbourhood_lower_noise(const local_test_scratch& s, int w, int h, int x, int y, int radius,
                                         int min_count, std::vector<float>& pool, std::size_t& count) {
-    float* p = pool_room(pool, radius);
-    count = 0;
-    for_each_neighbour(w, h, x, y, radius, [&](std::size_t j) {
+    return neighbour_median(w, h, x, y, radius, min_count, pool, [&](std::size_t j) {
         const double a = s.level[0][j], b = s.level[1][j];
-        if (!(a == a && b == b)) return;
-        const float r = a < b ? s.rel_var[0][j] : b < a ? s.rel_var[1][j] : std::min(s.rel_var[0][j], s.rel_var[1][j]);
-        if (r == r) p[count++] = r;
-    });
-    if (count < static_cast<std::size_t>(std::max(min_count, 1))) return std::numeric_limits<double>::quiet_NaN();
-    double med = 0, mad = 0;
-    median_and_mad(p, count, med, mad);
-    return med;
+        if (!(a == a && b == b)) return std::numeric_limits<float>::quiet_NaN();
+        return a < b ? s.rel_var[0][j] : b < a ? s.rel_var[1][j] : std::min(s.rel_var[0][j], s.rel_var[1][j]);
+    }, count);
 }
 
 // The statistic for the half whose level is hi against lo (hi > lo > 0), with r~ = r:
@@ -603,22 +609,30 @@ inline bool paulson_may_exceed(double f, double d1, double d2, double z) noexcep
 
 // P(F > f) for F(d1, d2), f > 0: I_y(d2/2, d1/2) with y = d2 / (d2 + d1 f), by the continued
 // fraction on whichever side converges (the small tails the test asks for come out directly).
+struct f_tail_terms {  // I_y(a, b) = front cf(a, b, y) / a, front = y^a y1^b / B(a, b)
+    double a, b, y, y1, log_front;
+    bool direct;  // the continued fraction converges on this side (else on 1 - y)
+};
+inline f_tail_terms f_tail_at(double f, double d1, double d2) noexcept {
+    f_tail_terms t;
+    t.a = 0.5 * d2, t.b = 0.5 * d1;
+    t.y = d2 / (d2 + d1 * f), t.y1 = d1 * f / (d2 + d1 * f);
+    t.log_front = t.a * std::log(t.y) + t.b * std::log(t.y1) - (std::lgamma(t.a) + std::lgamma(t.b) - std::lgamma(t.a + t.b));
+    t.direct = t.y < (t.a + 1.0) / (t.a + t.b + 2.0);
+    return t;
+}
 inline double f_upper_tail(double f, double d1, double d2) noexcept {
-    const double a = 0.5 * d2, b = 0.5 * d1;
-    const double y = d2 / (d2 + d1 * f), y1 = d1 * f / (d2 + d1 * f);
-    const double log_front = a * std::log(y) + b * std::log(y1) - (std::lgamma(a) + std::lgamma(b) - std::lgamma(a + b));
-    if (y < (a + 1.0) / (a + b + 2.0)) return std::exp(log_front) * incbeta_cf(a, b, y) / a;
-    return 1.0 - std::exp(log_front) * incbeta_cf(b, a, y1) / b;
+    const f_tail_terms t = f_tail_at(f, d1, d2);
+    if (t.direct) return std::exp(t.log_front) * incbeta_cf(t.a, t.b, t.y) / t.a;
+    return 1.0 - std::exp(t.log_front) * incbeta_cf(t.b, t.a, t.y1) / t.b;
 }
 
 // log P(F > f), f_upper_tail's continued fractions kept in logs: exact far below the
 // smallest double (1e30 times the level at m = 4: -1374, where Paulson's point says -94).
 inline double f_log_upper_tail(double f, double d1, double d2) noexcept {
-    const double a = 0.5 * d2, b = 0.5 * d1;
-    const double y = d2 / (d2 + d1 * f), y1 = d1 * f / (d2 + d1 * f);
-    const double log_front = a * std::log(y) + b * std::log(y1) - (std::lgamma(a) + std::lgamma(b) - std::lgamma(a + b));
-    if (y < (a + 1.0) / (a + b + 2.0)) return log_front + std::log(incbeta_cf(a, b, y) / a);
-    return std::log1p(-std::exp(log_front) * incbeta_cf(b, a, y1) / b);
+    const f_tail_terms t = f_tail_at(f, d1, d2);
+    if (t.direct) return t.log_front + std::log(incbeta_cf(t.a, t.b, t.y) / t.a);
+    return std::log1p(-std::exp(t.log_front) * incbeta_cf(t.b, t.a, t.y1) / t.b);
 }
 
 // log P(level / around > f) for a pixel's mean over both halves, a gamma(2 m) mean when each

@@ -715,13 +715,10 @@ private:
         };
         // the frame's family: the one-half decisions' p-values and these
         pair_family_.assign(frame_log_p_.begin(), frame_log_p_.end());
-        bool any = false;
         for (std::size_t j = 0; j < pairs_.size(); ++j)
-            if (judged(j) && pair_level_log_p_[j] != -HUGE_VAL) {  // tested: -inf is "cannot tell"
+            if (judged(j) && pair_level_log_p_[j] != -HUGE_VAL)  // tested: -inf is "cannot tell"
                 pair_family_.push_back(pair_level_log_p_[j]);
-                any = true;
-            }
-        if (!any) return;
+        if (pair_family_.size() == frame_log_p_.size()) return;  // no pair to judge
         const double level = bh_log_threshold(pair_family_, tested, options_.alpha);
         for (std::size_t j = 0; j < pairs_.size(); ++j) {
             if (!judged(j) || pair_level_log_p_[j] == -HUGE_VAL || !(pair_level_log_p_[j] > level)) continue;
