@@ -22,14 +22,20 @@
 
 #ifdef FIREFLY_HAVE_OPENEXR
 #include <Imath/ImathBox.h>
+#include <Imath/half.h>
+#include <OpenEXR/IlmThreadPool.h>
 #include <OpenEXR/ImfChannelList.h>
 #include <OpenEXR/ImfFrameBuffer.h>
 #include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfPartType.h>
 #include <OpenEXR/ImfIO.h>
 #include <OpenEXR/ImfInputFile.h>
 #include <OpenEXR/ImfOutputFile.h>
 #include <OpenEXR/ImfStdIO.h>
 #include <OpenEXR/ImfThreading.h>
+#include <OpenEXR/openexr.h>
+
+#include "exr_zip.hpp"
 #endif
 #ifdef FIREFLY_HAVE_PNG
 #include <png.h>
@@ -218,6 +224,137 @@ inline std::string exr_header_check(Imf::IStream& in, std::uint64_t stream_bytes
     return {};
 }
 
+// Runs fn(first, last) over [0, count) in bands on OpenEXR's global thread pool (set by
+// set_exr_threads; with no threads the bands run here, in order). fn must not throw.
+template <class Fn>
+void on_exr_pool(std::size_t count, const Fn& fn) {
+    class band : public IlmThread::Task {
+    public:
+        band(IlmThread::TaskGroup* g, const Fn& f, std::size_t a, std::size_t b) : Task(g), f_(f), a_(a), b_(b) {}
+        void execute() override { f_(a_, b_); }
+
+    private:
+        const Fn& f_;
+        std::size_t a_, b_;
+    };
+    const std::size_t threads = static_cast<std::size_t>(std::max(1, IlmThread::ThreadPool::globalThreadPool().numThreads()));
+    const std::size_t bands = std::min(count, threads * 4);
+    IlmThread::TaskGroup group;  // its destructor waits for every band
+    for (std::size_t k = 0; k < bands; ++k)
+        IlmThread::ThreadPool::addGlobalTask(new band(&group, fn, count * k / bands, count * (k + 1) / bands));
+}
+
+// How a scanline file's chunks are laid out, when the tools unpack them themselves (ZIP, ZIPS
+// or no compression, every channel sampled at every pixel; lines_per_chunk 0 otherwise): per
+// channel in file order, its bytes per sample, its type and where it goes in the output.
+struct exr_chunk_layout {
+    struct channel {
+        int bytes;
+        Imf::PixelType type;
+        int dest;  // index in the wanted names, -1 when not wanted
+    };
+    std::vector<channel> channels;
+    std::size_t line_bytes = 0;
+    int lines_per_chunk = 0;
+};
+
+inline exr_chunk_layout exr_layout_of(const Imf::Header& header, const std::vector<std::string>& names, int width) {
+    exr_chunk_layout l;
+    const Imf::Compression c = header.compression();
+    if (header.hasTileDescription() || (header.hasType() && header.type() != Imf::SCANLINEIMAGE)) return l;
+    if (c != Imf::NO_COMPRESSION && c != Imf::ZIPS_COMPRESSION && c != Imf::ZIP_COMPRESSION) return l;
+    if (!(std::uint16_t{1} == 1 && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__)) return l;
+    std::size_t pixel_bytes = 0;
+    for (auto it = header.channels().begin(); it != header.channels().end(); ++it) {
+        const Imf::Channel& ch = it.channel();
+        if (ch.xSampling != 1 || ch.ySampling != 1) return {};
+        if (ch.type != Imf::HALF && ch.type != Imf::FLOAT && ch.type != Imf::UINT) return {};
+        const int dest = static_cast<int>(std::find(names.begin(), names.end(), it.name()) - names.begin());
+        l.channels.push_back({ch.type == Imf::HALF ? 2 : 4, ch.type, dest < static_cast<int>(names.size()) ? dest : -1});
+        pixel_bytes += static_cast<std::size_t>(l.channels.back().bytes);
+    }
+    l.line_bytes = pixel_bytes * static_cast<std::size_t>(width);
+    l.lines_per_chunk = c == Imf::ZIP_COMPRESSION ? exr_zip::lines_zip : c == Imf::ZIPS_COMPRESSION ? exr_zip::lines_zips
+                                                                                                   : exr_zip::lines_none;
+    return l;
+}
+
+// One line of a chunk (the file's channels in order) into the wanted channels of `out` (nc
+// floats per pixel), converting half and unsigned int as OpenEXR does.
+inline void exr_scatter_line(const exr_chunk_layout& l, const std::uint8_t* p, int width, std::size_t nc, float* out) {
+    for (const auto& ch : l.channels) {
+        if (ch.dest >= 0) {
+            float* o = out + ch.dest;
+            for (int x = 0; x < width; ++x, p += ch.bytes, o += nc) {
+                if (ch.type == Imf::FLOAT) {
+                    std::memcpy(o, p, 4);
+                } else if (ch.type == Imf::HALF) {
+                    std::uint16_t b;
+                    std::memcpy(&b, p, 2);
+                    Imath::half h;
+                    h.setBits(b);
+                    *o = static_cast<float>(h);
+                } else {
+                    std::uint32_t u;
+                    std::memcpy(&u, p, 4);
+                    *o = static_cast<float>(u);
+                }
+            }
+        } else {
+            p += static_cast<std::size_t>(ch.bytes) * static_cast<std::size_t>(width);
+        }
+    }
+}
+
+// Reads the pixels of an open file whose layout exr_layout_of accepted into out.pixels (sized,
+// nc channels): the chunks' stored bytes through OpenEXR, then unpacked on its thread pool.
+inline std::string exr_read_chunks(Imf::InputFile& file, const exr_chunk_layout& l, const Imath::Box2i& dw,
+                                   std::size_t nc, image& out) {
+    const int width = dw.max.x - dw.min.x + 1, height = dw.max.y - dw.min.y + 1;
+    const std::size_t chunks = static_cast<std::size_t>((height + l.lines_per_chunk - 1) / l.lines_per_chunk);
+    std::vector<std::size_t> start(chunks + 1, 0);
+    std::vector<std::uint8_t> stored;
+    for (std::size_t k = 0; k < chunks; ++k) {
+        const char* data = nullptr;
+        int size = 0;
+        file.rawPixelData(dw.min.y + static_cast<int>(k) * l.lines_per_chunk, data, size);
+        if (size < 0) return "a chunk of negative size";
+        stored.insert(stored.end(), data, data + size);
+        start[k + 1] = stored.size();
+    }
+    std::vector<unsigned char> bad(chunks, 0);
+    on_exr_pool(chunks, [&](std::size_t first, std::size_t last) {
+        thread_local exr_zip::codec codec;
+        thread_local std::vector<std::uint8_t> raw;
+        for (std::size_t k = first; k < last; ++k) {
+            const int y0 = static_cast<int>(k) * l.lines_per_chunk;
+            const int lines = std::min(l.lines_per_chunk, height - y0);
+            const std::size_t n = l.line_bytes * static_cast<std::size_t>(lines);
+            try {
+                raw.resize(n);
+            } catch (const std::bad_alloc&) {
+                bad[k] = 1;
+                continue;
+            }
+            const std::size_t packed = start[k + 1] - start[k];
+            if (packed == n) {
+                std::memcpy(raw.data(), stored.data() + start[k], n);
+            } else if (file.header().compression() == Imf::NO_COMPRESSION ||
+                       !codec.unpack(stored.data() + start[k], packed, raw.data(), n)) {
+                bad[k] = 1;
+                continue;
+            }
+            for (int j = 0; j < lines; ++j)
+                exr_scatter_line(l, raw.data() + l.line_bytes * static_cast<std::size_t>(j), width, nc,
+                                 out.pixels.data() + (static_cast<std::size_t>(y0 + j) * static_cast<std::size_t>(width)) * nc);
+        }
+    });
+    for (std::size_t k = 0; k < chunks; ++k)
+        if (bad[k]) return "the chunk at line " + std::to_string(dw.min.y + static_cast<int>(k) * l.lines_per_chunk) +
+                           " does not unpack to its lines";
+    return {};
+}
+
 // Reads the named channels (in that order) from an EXR stream of `stream_bytes` bytes; the
 // function the file reader and the fuzz target share. `name` labels the messages.
 inline std::string read_exr(Imf::IStream& in, std::uint64_t stream_bytes, const std::string& name,
@@ -246,6 +383,11 @@ inline std::string read_exr(Imf::IStream& in, std::uint64_t stream_bytes, const 
         out.display_window = {disp.min.x, disp.min.y, disp.max.x, disp.max.y};
         // Slice::Make places the window's origin with integer (not pointer) arithmetic, so
         // windows far from (0, 0) address nothing outside the buffer.
+        const exr_chunk_layout layout = exr_layout_of(file.header(), names, static_cast<int>(w));
+        if (layout.lines_per_chunk > 0) {
+            const std::string e = exr_read_chunks(file, layout, dw, nc, out);
+            return e.empty() ? e : name + ": " + e;
+        }
         Imf::FrameBuffer fb;
         for (std::size_t c = 0; c < nc; ++c)
             fb.insert(names[c].c_str(), Imf::Slice::Make(Imf::FLOAT, out.pixels.data() + c, dw, nc * sizeof(float),
@@ -291,28 +433,140 @@ inline Imath::Box2i box_of(const window& w, const Imath::Box2i& fallback) {
     return w.empty() ? fallback : Imath::Box2i({w.min_x, w.min_y}, {w.max_x, w.max_y});
 }
 
-// Writes all channels of `img` as 32-bit float EXR (ZIP compression) to a stream.
-inline std::string write_exr(Imf::OStream& os, const image& img) {
+// OpenEXR's core library writes the header, places the chunks and their offset table through
+// these callbacks into an Imf::OStream; the first error is kept for the message.
+struct exr_core_sink {
+    Imf::OStream* os;
+    std::string error;
+    std::uint64_t end = 0;  // bytes written so far: the core writes the chunks past the
+                            // offset table's place first and the table last
+};
+
+inline std::int64_t exr_core_write(exr_const_context_t, void* user, const void* buffer, std::uint64_t size,
+                                   std::uint64_t offset, exr_stream_error_func_ptr_t) {
+    auto* sink = static_cast<exr_core_sink*>(user);
     try {
-        const Imath::Box2i origin({0, 0}, {img.width - 1, img.height - 1});
-        const Imath::Box2i dw = box_of(img.data_window, origin);
-        if (std::int64_t{dw.max.x} - dw.min.x + 1 != img.width || std::int64_t{dw.max.y} - dw.min.y + 1 != img.height)
-            return std::string(os.fileName()) + ": the data window does not match the image size";
-        Imf::Header header(box_of(img.display_window, dw), dw);
-        header.compression() = Imf::ZIP_COMPRESSION;
-        const std::size_t nc = img.channels.size();
-        for (const auto& n : img.channels) header.channels().insert(n.c_str(), Imf::Channel(Imf::FLOAT));
-        Imf::OutputFile file(os, header);
-        Imf::FrameBuffer fb;
-        for (std::size_t c = 0; c < nc; ++c)
-            fb.insert(img.channels[c].c_str(), Imf::Slice::Make(Imf::FLOAT, img.pixels.data() + c, dw, nc * sizeof(float),
-                                                                nc * sizeof(float) * static_cast<std::size_t>(img.width)));
-        file.setFrameBuffer(fb);
-        file.writePixels(img.height);
-        return {};
+        if (offset > sink->end) {  // a gap: zeros, since not every stream can seek past its end
+            const std::vector<char> zeros(static_cast<std::size_t>(offset - sink->end), 0);
+            sink->os->seekp(sink->end);
+            sink->os->write(zeros.data(), static_cast<int>(zeros.size()));
+            sink->end = offset;
+        }
+        if (sink->os->tellp() != offset) sink->os->seekp(offset);
+        sink->end = std::max(sink->end, offset + size);
+        const char* p = static_cast<const char*>(buffer);
+        for (std::uint64_t left = size; left > 0;) {
+            const int n = static_cast<int>(std::min<std::uint64_t>(left, std::uint64_t{1} << 30));
+            sink->os->write(p, n);
+            p += n;
+            left -= static_cast<std::uint64_t>(n);
+        }
+        return static_cast<std::int64_t>(size);
     } catch (const std::exception& e) {
-        return std::string(os.fileName()) + ": " + e.what();
+        if (sink->error.empty()) sink->error = e.what();
+        return -1;
     }
+}
+
+inline void exr_core_error(exr_const_context_t ctxt, exr_result_t code, const char* message) {
+    void* user = nullptr;
+    if (exr_get_user_data(ctxt, &user) != EXR_ERR_SUCCESS || !user) return;
+    auto* sink = static_cast<exr_core_sink*>(user);
+    if (sink->error.empty()) sink->error = message ? message : exr_get_default_error_message(code);
+}
+
+// The header of a float scanline file with ZIP compression and the image's channels (in name
+// order, as EXR stores them); false (with the sink's message) when OpenEXR refuses it.
+inline bool exr_core_header(exr_context_t ctxt, const image& img, const Imath::Box2i& dw,
+                            const std::vector<std::string>& sorted) {
+    const Imath::Box2i disp = box_of(img.display_window, dw);
+    const exr_attr_box2i_t data_window{{dw.min.x, dw.min.y}, {dw.max.x, dw.max.y}};
+    const exr_attr_box2i_t display_window{{disp.min.x, disp.min.y}, {disp.max.x, disp.max.y}};
+    const exr_attr_v2f_t centre{0.0f, 0.0f};
+    int part = 0;
+    if (exr_add_part(ctxt, nullptr, EXR_STORAGE_SCANLINE, &part) != EXR_ERR_SUCCESS) return false;
+    if (exr_initialize_required_attr(ctxt, part, &display_window, &data_window, 1.0f, &centre, 1.0f,
+                                     EXR_LINEORDER_INCREASING_Y, EXR_COMPRESSION_ZIP) != EXR_ERR_SUCCESS)
+        return false;
+    for (const auto& n : sorted)
+        if (exr_add_channel(ctxt, part, n.c_str(), EXR_PIXEL_FLOAT, EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1) !=
+            EXR_ERR_SUCCESS)
+            return false;
+    return exr_write_header(ctxt) == EXR_ERR_SUCCESS;
+}
+
+// The bytes of chunk k (ZIP: 16 lines) of `img`, its channels in the file's order: each line
+// holds each channel's samples in turn.
+inline void exr_gather_chunk(const image& img, const std::vector<std::size_t>& order, int y0, int lines,
+                             std::vector<std::uint8_t>& raw) {
+    const std::size_t nc = img.channels.size(), w = static_cast<std::size_t>(img.width);
+    raw.resize(static_cast<std::size_t>(lines) * w * nc * 4);
+    float* o = reinterpret_cast<float*>(raw.data());
+    for (int j = 0; j < lines; ++j) {
+        const float* row = img.pixels.data() + static_cast<std::size_t>(y0 + j) * w * nc;
+        for (std::size_t c : order)
+            for (std::size_t x = 0; x < w; ++x) *o++ = row[x * nc + c];
+    }
+}
+
+// Writes all channels of `img` as 32-bit float EXR (ZIP compression) to a stream: the chunks
+// packed on OpenEXR's thread pool a batch at a time (exr_zip.hpp), written in order.
+inline std::string write_exr(Imf::OStream& os, const image& img) {
+    const std::string name = os.fileName();
+    const Imath::Box2i origin({0, 0}, {img.width - 1, img.height - 1});
+    const Imath::Box2i dw = box_of(img.data_window, origin);
+    if (img.width < 1 || img.height < 1 || std::int64_t{dw.max.x} - dw.min.x + 1 != img.width ||
+        std::int64_t{dw.max.y} - dw.min.y + 1 != img.height)
+        return name + ": the data window does not match the image size";
+    std::vector<std::size_t> order(img.channels.size());
+    for (std::size_t c = 0; c < order.size(); ++c) order[c] = c;
+    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return img.channels[a] < img.channels[b]; });
+    std::vector<std::string> sorted;
+    for (std::size_t c : order) sorted.push_back(img.channels[c]);
+    if (sorted.empty() || std::adjacent_find(sorted.begin(), sorted.end()) != sorted.end())
+        return name + ": no channels, or a channel name twice";
+    exr_core_sink sink{&os, {}};
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    init.user_data = &sink;
+    init.write_fn = exr_core_write;
+    init.error_handler_fn = exr_core_error;
+    exr_context_t ctxt = nullptr;
+    if (exr_start_write(&ctxt, name.c_str(), EXR_WRITE_FILE_DIRECTLY, &init) != EXR_ERR_SUCCESS)
+        return name + ": " + (sink.error.empty() ? "cannot start writing" : sink.error);
+    bool ok = exr_core_header(ctxt, img, dw, sorted);
+    const int lines = exr_zip::lines_zip;
+    const std::size_t chunks = static_cast<std::size_t>((img.height + lines - 1) / lines);
+    const std::size_t batch = 4 * static_cast<std::size_t>(std::max(1, IlmThread::ThreadPool::globalThreadPool().numThreads()));
+    std::vector<std::vector<std::uint8_t>> packed(batch);
+    std::vector<unsigned char> failed(batch, 0);
+    for (std::size_t first = 0; ok && first < chunks; first += batch) {
+        const std::size_t count = std::min(batch, chunks - first);
+        on_exr_pool(count, [&](std::size_t a, std::size_t b) {
+            thread_local exr_zip::codec codec;
+            thread_local std::vector<std::uint8_t> raw;
+            for (std::size_t i = a; i < b; ++i) {
+                const int y0 = static_cast<int>(first + i) * lines;
+                try {
+                    exr_gather_chunk(img, order, y0, std::min(lines, img.height - y0), raw);
+                    failed[i] = !codec.pack(raw.data(), raw.size(), packed[i]);
+                } catch (const std::bad_alloc&) {
+                    failed[i] = 1;
+                }
+            }
+        });
+        for (std::size_t i = 0; ok && i < count; ++i) {
+            if (failed[i]) {
+                sink.error = "out of memory";
+                ok = false;
+            } else {
+                ok = exr_write_scanline_chunk(ctxt, 0, dw.min.y + static_cast<int>(first + i) * lines, packed[i].data(),
+                                              packed[i].size()) == EXR_ERR_SUCCESS;
+            }
+        }
+    }
+    const bool finished = exr_finish(&ctxt) == EXR_ERR_SUCCESS;
+    if (ok && finished && sink.error.empty()) return {};
+    return name + ": " + (sink.error.empty() ? "write failed" : sink.error);
 }
 #endif
 

@@ -1,0 +1,37 @@
+# firefly_tools_io: image I/O for the tools, the benchmarks and the fuzz targets, each part
+# optional: EXR through OpenEXR (its core library writes headers and places the chunks the
+# tools pack themselves, examples/exr_zip.hpp; libdeflate packs them when present, 2.2x faster
+# than zlib), previews through libpng. Included from examples, bench and tests/fuzz; defines the
+# target once.
+if(TARGET firefly_tools_io)
+  return()
+endif()
+find_package(OpenEXR CONFIG QUIET)
+find_package(PNG QUIET)
+
+add_library(firefly_tools_io INTERFACE)
+target_include_directories(firefly_tools_io INTERFACE ${CMAKE_CURRENT_LIST_DIR} ${PROJECT_SOURCE_DIR}/bench)
+if(TARGET OpenEXR::OpenEXR)
+  target_link_libraries(firefly_tools_io INTERFACE OpenEXR::OpenEXR OpenEXR::OpenEXRCore)
+  target_compile_definitions(firefly_tools_io INTERFACE FIREFLY_HAVE_OPENEXR)
+  find_package(PkgConfig QUIET)
+  if(PkgConfig_FOUND)
+    pkg_check_modules(LIBDEFLATE QUIET IMPORTED_TARGET libdeflate)
+  endif()
+  if(TARGET PkgConfig::LIBDEFLATE)
+    target_link_libraries(firefly_tools_io INTERFACE PkgConfig::LIBDEFLATE)
+    target_compile_definitions(firefly_tools_io INTERFACE FIREFLY_HAVE_LIBDEFLATE)
+  else()
+    find_package(ZLIB REQUIRED)
+    target_link_libraries(firefly_tools_io INTERFACE ZLIB::ZLIB)
+    message(STATUS "firefly: libdeflate not found: the tools pack EXR's ZIP chunks with zlib, ~2x slower (apt-get install libdeflate-dev pkg-config)")
+  endif()
+else()
+  message(STATUS "firefly: OpenEXR not found: the firefly command-line tool is not built and the demo writes no EXR (apt-get install libopenexr-dev)")
+endif()
+if(PNG_FOUND)
+  target_link_libraries(firefly_tools_io INTERFACE PNG::PNG)
+  target_compile_definitions(firefly_tools_io INTERFACE FIREFLY_HAVE_PNG)
+else()
+  message(STATUS "firefly: libpng not found: the demo writes no PNG previews (apt-get install libpng-dev)")
+endif()

@@ -1,0 +1,247 @@
+// The tools' EXR reading and writing (examples/image_io.hpp, examples/exr_zip.hpp): chunks
+// packed and unpacked by the tools themselves must be the chunks OpenEXR writes and reads.
+// Every file here is checked against OpenEXR's own FrameBuffer reader and writer.
+#include <catch2/catch.hpp>
+
+#include <OpenEXR/ImfStdIO.h>
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "image_io.hpp"
+
+namespace {
+
+using firefly_tools::image;
+namespace zip = firefly_tools::exr_zip;
+
+// OpenEXR's own transform, written as the format describes it (two pointers, then the
+// predictor in place), to check exr_zip's against.
+std::vector<std::uint8_t> reference_forward(const std::vector<std::uint8_t>& in) {
+    std::vector<std::uint8_t> t(in.size());
+    std::size_t a = 0, b = (in.size() + 1) / 2;
+    for (std::size_t i = 0; i < in.size(); ++i) t[i % 2 == 0 ? a++ : b++] = in[i];
+    for (std::size_t i = t.size(); i-- > 1;) t[i] = static_cast<std::uint8_t>(t[i] - t[i - 1] + 128);
+    return t;
+}
+
+std::vector<std::uint8_t> random_bytes(std::size_t n, unsigned seed, int spread = 256) {
+    std::mt19937 rng(seed);
+    std::vector<std::uint8_t> v(n);
+    for (auto& x : v) x = static_cast<std::uint8_t>(rng() % static_cast<unsigned>(spread));
+    return v;
+}
+
+// Writes an image through OpenEXR's FrameBuffer interface (its own compressor), channels of
+// the given types, into a string.
+std::string imf_write(const image& img, Imf::Compression compression, const std::vector<Imf::PixelType>& types) {
+    Imf::StdOSStream os;
+    const Imath::Box2i dw({img.data_window.min_x, img.data_window.min_y}, {img.data_window.max_x, img.data_window.max_y});
+    Imf::Header header(dw, dw);
+    header.compression() = compression;
+    for (std::size_t c = 0; c < img.channels.size(); ++c) header.channels().insert(img.channels[c], Imf::Channel(types[c]));
+    const std::size_t nc = img.channels.size(), w = static_cast<std::size_t>(img.width);
+    std::vector<std::vector<char>> planes(nc);
+    Imf::FrameBuffer fb;
+    for (std::size_t c = 0; c < nc; ++c) {
+        const std::size_t bytes = types[c] == Imf::HALF ? 2 : 4;
+        planes[c].resize(img.pixels.size() / nc * bytes);
+        for (std::size_t i = 0; i < img.pixels.size() / nc; ++i) {
+            const float v = img.pixels[i * nc + c];
+            if (types[c] == Imf::HALF) {
+                const Imath::half h(v);
+                const std::uint16_t bits = h.bits();
+                std::memcpy(&planes[c][i * 2], &bits, 2);
+            } else if (types[c] == Imf::UINT) {
+                const auto u = static_cast<std::uint32_t>(std::isfinite(v) ? std::fmin(std::fabs(v), 1e6f) * 1000.0f : 7.0f);
+                std::memcpy(&planes[c][i * 4], &u, 4);
+            } else {
+                std::memcpy(&planes[c][i * 4], &v, 4);
+            }
+        }
+        fb.insert(img.channels[c], Imf::Slice::Make(types[c], planes[c].data(), dw, bytes, bytes * w));
+    }
+    Imf::OutputFile file(os, header);
+    file.setFrameBuffer(fb);
+    file.writePixels(img.height);
+    return os.str();
+}
+
+// Reads named channels as float through OpenEXR's FrameBuffer interface.
+std::vector<float> imf_read(const std::string& bytes, const std::vector<std::string>& names) {
+    Imf::StdISStream is;
+    is.str(bytes);
+    Imf::InputFile file(is);
+    const Imath::Box2i dw = file.header().dataWindow();
+    const std::size_t w = static_cast<std::size_t>(dw.max.x - dw.min.x + 1), h = static_cast<std::size_t>(dw.max.y - dw.min.y + 1);
+    const std::size_t nc = names.size();
+    std::vector<float> px(w * h * nc, -1.0f);
+    Imf::FrameBuffer fb;
+    for (std::size_t c = 0; c < nc; ++c)
+        fb.insert(names[c], Imf::Slice::Make(Imf::FLOAT, px.data() + c, dw, nc * 4, nc * 4 * w));
+    file.setFrameBuffer(fb);
+    file.readPixels(dw.min.y, dw.max.y);
+    return px;
+}
+
+std::string tools_read(const std::string& bytes, const std::vector<std::string>& names, image& out) {
+    Imf::StdISStream is;
+    is.str(bytes);
+    return firefly_tools::read_exr(is, bytes.size(), "test.exr", names, out);
+}
+
+std::string tools_write(const image& img, std::string& bytes) {
+    Imf::StdOSStream os;
+    const std::string e = firefly_tools::write_exr(os, img);
+    bytes = os.str();
+    return e;
+}
+
+// A w x h image of the named channels, data window at (x0, y0): smooth values with noise in
+// the low bits (so ZIP finds some structure but not all), a few special values.
+image test_image(int w, int h, int x0, int y0, const std::vector<std::string>& names, unsigned seed) {
+    image img;
+    img.width = w;
+    img.height = h;
+    img.channels = names;
+    img.data_window = {x0, y0, x0 + w - 1, y0 + h - 1};
+    img.display_window = img.data_window;
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> u(0.0f, 1.0f);
+    img.pixels.resize(static_cast<std::size_t>(w) * h * names.size());
+    for (std::size_t i = 0; i < img.pixels.size(); ++i) img.pixels[i] = 0.25f + 0.5f * static_cast<float>(i % 97) / 97.0f + 0.01f * u(rng);
+    if (img.pixels.size() > 5) {
+        img.pixels[0] = 0.0f;
+        img.pixels[1] = -3.5f;
+        img.pixels[2] = 1e30f;
+        img.pixels[3] = 1e-40f;  // denormal
+        img.pixels[4] = std::numeric_limits<float>::infinity();
+    }
+    return img;
+}
+
+bool same_bits(const std::vector<float>& a, const std::vector<float>& b) {
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
+}
+
+}  // namespace
+
+TEST_CASE("exr_zip: the transform is OpenEXR's and inverts exactly", "[exr_io]") {
+    for (std::size_t n : {0u, 1u, 2u, 3u, 15u, 16u, 17u, 31u, 32u, 33u, 34u, 48u, 1000u, 1001u, 100003u}) {
+        const auto raw = random_bytes(n, static_cast<unsigned>(n));
+        std::vector<std::uint8_t> t(n), back(n);
+        zip::forward_transform(raw.data(), n, t.data());
+        CHECK(t == reference_forward(raw));
+        zip::inverse_transform(t.data(), n, back.data());
+        CHECK(back == raw);
+    }
+}
+
+TEST_CASE("exr_zip: chunks round-trip; incompressible ones are stored as they are", "[exr_io]") {
+    zip::codec codec;
+    for (int spread : {2, 256}) {  // compressible, incompressible
+        const auto raw = random_bytes(24000, 7, spread);
+        std::vector<std::uint8_t> packed, back(raw.size());
+        REQUIRE(codec.pack(raw.data(), raw.size(), packed));
+        if (spread == 256) {
+            CHECK(packed == raw);
+        } else {
+            CHECK(packed.size() < raw.size() / 2);
+        }
+        REQUIRE(codec.unpack(packed.data(), packed.size(), back.data(), back.size()));
+        CHECK(back == raw);
+    }
+    const auto raw = random_bytes(1, 3);
+    std::vector<std::uint8_t> packed, back(1);
+    REQUIRE(codec.pack(raw.data(), 1, packed));
+    CHECK(packed == raw);
+}
+
+TEST_CASE("exr_zip: streams that are not exactly the chunk are refused", "[exr_io]") {
+    zip::codec codec;
+    const auto raw = random_bytes(5000, 11, 4);
+    std::vector<std::uint8_t> packed;
+    REQUIRE(codec.pack(raw.data(), raw.size(), packed));
+    REQUIRE(packed.size() < raw.size());
+    std::vector<std::uint8_t> back(raw.size() + 1);
+    CHECK_FALSE(codec.unpack(packed.data(), packed.size(), back.data(), raw.size() - 1));  // too short an output
+    CHECK_FALSE(codec.unpack(packed.data(), packed.size(), back.data(), raw.size() + 1));  // the stream ends early
+    CHECK_FALSE(codec.unpack(packed.data(), packed.size() - 3, back.data(), raw.size()));  // truncated
+    auto flipped = packed;
+    flipped[flipped.size() / 2] ^= 0x5a;
+    CHECK_FALSE(codec.unpack(flipped.data(), flipped.size(), back.data(), raw.size()));  // checksum
+    CHECK_FALSE(codec.unpack(raw.data(), raw.size(), back.data(), 10));  // more stored than the chunk holds
+}
+
+TEST_CASE("write_exr: OpenEXR reads back the same bits, with any thread count", "[exr_io]") {
+    const std::vector<std::string> names{"R", "G", "B", "Variance.R", "Variance.G", "Variance.B", "A"};
+    for (const auto& size : std::vector<std::pair<int, int>>{{1, 1}, {37, 16}, {37, 17}, {64, 33}, {3, 100}}) {
+        const image img = test_image(size.first, size.second, -5, 7, names, 3);
+        std::string one, two;
+        firefly_tools::set_exr_threads(0);
+        REQUIRE(tools_write(img, one).empty());
+        firefly_tools::set_exr_threads(2);
+        REQUIRE(tools_write(img, two).empty());
+        firefly_tools::set_exr_threads(0);
+        CHECK(one == two);
+        CHECK(same_bits(imf_read(one, names), img.pixels));
+        image back;
+        REQUIRE(tools_read(one, names, back).empty());
+        CHECK(same_bits(back.pixels, img.pixels));
+        CHECK(back.data_window.min_x == -5);
+        CHECK(back.data_window.max_y == 7 + size.second - 1);
+    }
+}
+
+TEST_CASE("write_exr: refuses what cannot be written, with a message", "[exr_io]") {
+    image img = test_image(4, 4, 0, 0, {"R", "G"}, 1);
+    std::string bytes;
+    img.channels = {"R", "R"};
+    CHECK_FALSE(tools_write(img, bytes).empty());
+    img = test_image(4, 4, 0, 0, {"R"}, 1);
+    img.data_window = {0, 0, 9, 9};
+    CHECK_FALSE(tools_write(img, bytes).empty());
+}
+
+TEST_CASE("read_exr: files OpenEXR wrote read as OpenEXR reads them, in every compression", "[exr_io]") {
+    const std::vector<std::string> in_file{"A", "B", "G", "R", "Variance", "Z"};
+    const std::vector<Imf::PixelType> types{Imf::HALF, Imf::FLOAT, Imf::HALF, Imf::FLOAT, Imf::UINT, Imf::FLOAT};
+    const std::vector<std::string> wanted{"R", "G", "B", "Variance", "A"};  // Z read and skipped
+    for (Imf::Compression c : {Imf::ZIP_COMPRESSION, Imf::ZIPS_COMPRESSION, Imf::NO_COMPRESSION, Imf::PIZ_COMPRESSION,
+                               Imf::RLE_COMPRESSION}) {
+        for (const auto& size : std::vector<std::pair<int, int>>{{1, 1}, {33, 16}, {33, 35}}) {
+            const image img = test_image(size.first, size.second, 3, -9, in_file, 5);
+            const std::string bytes = imf_write(img, c, types);
+            for (unsigned threads : {0u, 2u}) {
+                firefly_tools::set_exr_threads(threads);
+                image back;
+                REQUIRE(tools_read(bytes, wanted, back).empty());
+                CHECK(same_bits(back.pixels, imf_read(bytes, wanted)));
+            }
+            firefly_tools::set_exr_threads(0);
+        }
+    }
+}
+
+TEST_CASE("read_exr: a damaged chunk is an error naming its line, never a crash", "[exr_io]") {
+    const std::vector<std::string> names{"B", "G", "R"};
+    image img = test_image(40, 40, 0, 0, names, 9);
+    for (std::size_t i = 0; i < img.pixels.size(); ++i) img.pixels[i] = static_cast<float>(i % 40) * 0.25f;  // compresses
+    std::string good;
+    REQUIRE(tools_write(img, good).empty());
+    REQUIRE(good.size() < img.pixels.size());  // the chunks are zlib streams, not stored as they are
+    image back;
+    REQUIRE(tools_read(good, names, back).empty());
+    // The last chunk's stored bytes sit at the end of the file: damage its middle.
+    std::string bad = good;
+    bad[bad.size() - 10] = static_cast<char>(bad[bad.size() - 10] ^ 0x77);
+    const std::string e = tools_read(bad, names, back);
+    CHECK_FALSE(e.empty());
+    CHECK(e.find("test.exr") != std::string::npos);
+}
