@@ -158,7 +158,7 @@ TEST_CASE("energy return: exact at the nodes, close between them", "[energy]") {
 }
 
 TEST_CASE("energy return: one scratch over frames of other shapes gives a fresh scratch's bits", "[energy][invariant]") {
-    // the sums' order follows the shape (longer axis first, both on a square): nothing of a
+    // the sums' order follows the shape (shorter axis first, both on a square): nothing of a
     // frame of another shape or order may carry over; 1 to 3 pixel sides included
     const int shapes[][2] = {{37, 23}, {23, 37}, {23, 23}, {40, 1}, {1, 40}, {40, 3}, {3, 40}, {37, 23}};
     energy_scratch reused;

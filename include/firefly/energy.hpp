@@ -36,8 +36,8 @@
 // node_step(sigma) pixels (sigma / 2, a power of two), and s ratio is interpolated bilinearly
 // between nodes: a fraction of the work of full blurs, and a lone firefly still has s = 0 at
 // every node. Nodes are placed symmetrically, every sum adds opposite taps first
-// (v[-i] + v[+i]), and the separable sums run along the frame's longer axis first (a
-// transposed frame's longer axis is the other one: it takes the same sums in the same order),
+// (v[-i] + v[+i]), and the separable sums run along the frame's shorter axis first (a
+// transposed frame's shorter axis is the other one: it takes the same sums in the same order),
 // on a square frame in both orders, averaged; the interpolation is the mean of both orders:
 // a flipped or transposed frame gives the flipped or transposed result bit for bit. (Both
 // orders on every frame cost ~15% more of a 2K frame's pipeline for no accuracy.)
@@ -63,11 +63,12 @@ namespace firefly {
 
 namespace detail {
 
-// The order of the separable sums on a w x h frame: along the longer axis first, both (their
+// The order of the separable sums on a w x h frame: along the shorter axis first (y first on a
+// landscape frame: a 2K pipeline 2.5-3.5% faster than x first, in alternated runs), both (their
 // mean) on a square frame. A transpose swaps the axes and the order with them.
 enum class sum_order : unsigned char { both, x_first, y_first };
 inline sum_order sum_order_for(int w, int h) noexcept {
-    return w == h ? sum_order::both : w > h ? sum_order::x_first : sum_order::y_first;
+    return w == h ? sum_order::both : w > h ? sum_order::y_first : sum_order::x_first;
 }
 
 // The nodes the return is evaluated at along one axis of n pixels: every `step` pixels (a
