@@ -145,14 +145,15 @@ public:
         return true;
     }
 
-    // Unpacks a ZIP/ZIPS chunk of `packed_n` bytes into exactly `raw_n` bytes (a chunk of raw_n
-    // bytes is stored raw). False when the bytes are no zlib stream of exactly raw_n bytes.
+    // Unpacks a ZIP/ZIPS chunk of `packed_n` bytes into exactly `raw_n` bytes (a chunk stored
+    // in raw_n bytes or more holds them as they are, as OpenEXR reads it). False when the
+    // bytes are no zlib stream of exactly raw_n bytes.
     bool unpack(const std::uint8_t* packed, std::size_t packed_n, std::uint8_t* raw, std::size_t raw_n) {
-        if (packed_n == raw_n) {
+        if (raw_n == 0) return true;
+        if (packed_n >= raw_n) {
             std::memcpy(raw, packed, raw_n);
             return true;
         }
-        if (packed_n > raw_n) return false;
         scratch_.resize(raw_n);
 #ifdef FIREFLY_HAVE_LIBDEFLATE
         if (!d_ && !(d_ = libdeflate_alloc_decompressor())) return false;

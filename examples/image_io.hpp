@@ -225,23 +225,37 @@ inline std::string exr_header_check(Imf::IStream& in, std::uint64_t stream_bytes
 }
 
 // Runs fn(first, last) over [0, count) in bands on OpenEXR's global thread pool (set by
-// set_exr_threads; with no threads the bands run here, in order). fn must not throw.
+// set_exr_threads; with no threads the bands run here, in order). False when a band threw
+// (out of memory): an exception must not leave a task (a pool thread would terminate, and
+// without threads the group would wait for a task that never ends).
 template <class Fn>
-void on_exr_pool(std::size_t count, const Fn& fn) {
+bool on_exr_pool(std::size_t count, const Fn& fn) {
     class band : public IlmThread::Task {
     public:
-        band(IlmThread::TaskGroup* g, const Fn& f, std::size_t a, std::size_t b) : Task(g), f_(f), a_(a), b_(b) {}
-        void execute() override { f_(a_, b_); }
+        band(IlmThread::TaskGroup* g, const Fn& f, std::size_t a, std::size_t b, unsigned char& failed)
+            : Task(g), f_(f), a_(a), b_(b), failed_(failed) {}
+        void execute() override {
+            try {
+                f_(a_, b_);
+            } catch (...) {
+                failed_ = 1;
+            }
+        }
 
     private:
         const Fn& f_;
         std::size_t a_, b_;
+        unsigned char& failed_;
     };
     const std::size_t threads = static_cast<std::size_t>(std::max(1, IlmThread::ThreadPool::globalThreadPool().numThreads()));
     const std::size_t bands = std::min(count, threads * 4);
-    IlmThread::TaskGroup group;  // its destructor waits for every band
-    for (std::size_t k = 0; k < bands; ++k)
-        IlmThread::ThreadPool::addGlobalTask(new band(&group, fn, count * k / bands, count * (k + 1) / bands));
+    std::vector<unsigned char> failed(bands, 0);
+    {
+        IlmThread::TaskGroup group;  // its destructor waits for every band
+        for (std::size_t k = 0; k < bands; ++k)
+            IlmThread::ThreadPool::addGlobalTask(new band(&group, fn, count * k / bands, count * (k + 1) / bands, failed[k]));
+    }
+    return std::find(failed.begin(), failed.end(), 1) == failed.end();
 }
 
 // How a scanline file's chunks are laid out, when the tools unpack them themselves (ZIP, ZIPS
@@ -322,25 +336,22 @@ inline std::string exr_read_chunks(Imf::InputFile& file, const exr_chunk_layout&
         stored.insert(stored.end(), data, data + size);
         start[k + 1] = stored.size();
     }
+    // A chunk stored in as many bytes as its lines hold, or more, holds them as they are (as
+    // OpenEXR reads it); fewer are a zlib stream (ZIP, ZIPS) or a damaged chunk.
+    const bool zip = file.header().compression() != Imf::NO_COMPRESSION;
     std::vector<unsigned char> bad(chunks, 0);
-    on_exr_pool(chunks, [&](std::size_t first, std::size_t last) {
-        thread_local exr_zip::codec codec;
-        thread_local std::vector<std::uint8_t> raw;
+    const bool ran = on_exr_pool(chunks, [&](std::size_t first, std::size_t last) {
+        exr_zip::codec codec;  // per band: nothing of a hostile file's size outlives the read
+        std::vector<std::uint8_t> raw;
         for (std::size_t k = first; k < last; ++k) {
             const int y0 = static_cast<int>(k) * l.lines_per_chunk;
             const int lines = std::min(l.lines_per_chunk, height - y0);
             const std::size_t n = l.line_bytes * static_cast<std::size_t>(lines);
-            try {
-                raw.resize(n);
-            } catch (const std::bad_alloc&) {
-                bad[k] = 1;
-                continue;
-            }
+            raw.resize(n);
             const std::size_t packed = start[k + 1] - start[k];
-            if (packed == n) {
+            if (packed >= n) {
                 std::memcpy(raw.data(), stored.data() + start[k], n);
-            } else if (file.header().compression() == Imf::NO_COMPRESSION ||
-                       !codec.unpack(stored.data() + start[k], packed, raw.data(), n)) {
+            } else if (!zip || !codec.unpack(stored.data() + start[k], packed, raw.data(), n)) {
                 bad[k] = 1;
                 continue;
             }
@@ -349,6 +360,7 @@ inline std::string exr_read_chunks(Imf::InputFile& file, const exr_chunk_layout&
                                  out.pixels.data() + (static_cast<std::size_t>(y0 + j) * static_cast<std::size_t>(width)) * nc);
         }
     });
+    if (!ran) return "out of memory";
     for (std::size_t k = 0; k < chunks; ++k)
         if (bad[k]) return "the chunk at line " + std::to_string(dw.min.y + static_cast<int>(k) * l.lines_per_chunk) +
                            " does not unpack to its lines";
@@ -468,11 +480,16 @@ inline std::int64_t exr_core_write(exr_const_context_t, void* user, const void* 
     }
 }
 
-inline void exr_core_error(exr_const_context_t ctxt, exr_result_t code, const char* message) {
-    void* user = nullptr;
-    if (exr_get_user_data(ctxt, &user) != EXR_ERR_SUCCESS || !user) return;
-    auto* sink = static_cast<exr_core_sink*>(user);
-    if (sink->error.empty()) sink->error = message ? message : exr_get_default_error_message(code);
+// The sink of the write in progress on this thread: the core calls the handler with its
+// context locked, so the handler must not ask the context for its user data (a deadlock).
+inline exr_core_sink*& exr_current_sink() {
+    thread_local exr_core_sink* sink = nullptr;
+    return sink;
+}
+
+inline void exr_core_error(exr_const_context_t, exr_result_t code, const char* message) {
+    exr_core_sink* sink = exr_current_sink();
+    if (sink && sink->error.empty()) sink->error = message ? message : exr_get_default_error_message(code);
 }
 
 // The header of a float scanline file with ZIP compression and the image's channels (in name
@@ -484,6 +501,7 @@ inline bool exr_core_header(exr_context_t ctxt, const image& img, const Imath::B
     const exr_attr_box2i_t display_window{{disp.min.x, disp.min.y}, {disp.max.x, disp.max.y}};
     const exr_attr_v2f_t centre{0.0f, 0.0f};
     int part = 0;
+    if (exr_set_longname_support(ctxt, 1) != EXR_ERR_SUCCESS) return false;  // names past 31 bytes, as Imf writes
     if (exr_add_part(ctxt, nullptr, EXR_STORAGE_SCANLINE, &part) != EXR_ERR_SUCCESS) return false;
     if (exr_initialize_required_attr(ctxt, part, &display_window, &data_window, 1.0f, &centre, 1.0f,
                                      EXR_LINEORDER_INCREASING_Y, EXR_COMPRESSION_ZIP) != EXR_ERR_SUCCESS)
@@ -507,6 +525,11 @@ inline void exr_gather_chunk(const image& img, const std::vector<std::size_t>& o
         for (std::size_t c : order)
             for (std::size_t x = 0; x < w; ++x) *o++ = row[x * nc + c];
     }
+    if (__BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__)  // EXR stores little-endian values
+        for (std::size_t i = 0; i + 3 < raw.size(); i += 4) {
+            std::swap(raw[i], raw[i + 3]);
+            std::swap(raw[i + 1], raw[i + 2]);
+        }
 }
 
 // Writes all channels of `img` as 32-bit float EXR (ZIP compression) to a stream: the chunks
@@ -526,6 +549,11 @@ inline std::string write_exr(Imf::OStream& os, const image& img) {
     if (sorted.empty() || std::adjacent_find(sorted.begin(), sorted.end()) != sorted.end())
         return name + ": no channels, or a channel name twice";
     exr_core_sink sink{&os, {}};
+    struct current {  // the handler's sink while this write runs (nested writes keep theirs)
+        exr_core_sink* before;
+        explicit current(exr_core_sink* s) : before(exr_current_sink()) { exr_current_sink() = s; }
+        ~current() { exr_current_sink() = before; }
+    } in_use(&sink);
     exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
     init.user_data = &sink;
     init.write_fn = exr_core_write;
@@ -541,21 +569,17 @@ inline std::string write_exr(Imf::OStream& os, const image& img) {
     std::vector<unsigned char> failed(batch, 0);
     for (std::size_t first = 0; ok && first < chunks; first += batch) {
         const std::size_t count = std::min(batch, chunks - first);
-        on_exr_pool(count, [&](std::size_t a, std::size_t b) {
-            thread_local exr_zip::codec codec;
-            thread_local std::vector<std::uint8_t> raw;
+        const bool ran = on_exr_pool(count, [&](std::size_t a, std::size_t b) {
+            exr_zip::codec codec;
+            std::vector<std::uint8_t> raw;
             for (std::size_t i = a; i < b; ++i) {
                 const int y0 = static_cast<int>(first + i) * lines;
-                try {
-                    exr_gather_chunk(img, order, y0, std::min(lines, img.height - y0), raw);
-                    failed[i] = !codec.pack(raw.data(), raw.size(), packed[i]);
-                } catch (const std::bad_alloc&) {
-                    failed[i] = 1;
-                }
+                exr_gather_chunk(img, order, y0, std::min(lines, img.height - y0), raw);
+                failed[i] = !codec.pack(raw.data(), raw.size(), packed[i]);
             }
         });
         for (std::size_t i = 0; ok && i < count; ++i) {
-            if (failed[i]) {
+            if (!ran || failed[i]) {
                 sink.error = "out of memory";
                 ok = false;
             } else {

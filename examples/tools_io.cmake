@@ -2,7 +2,7 @@
 # optional: EXR through OpenEXR (its core library writes headers and places the chunks the
 # tools pack themselves, examples/exr_zip.hpp; libdeflate packs them when present, 2.2x faster
 # than zlib), previews through libpng. Included from examples, bench and tests/fuzz; defines the
-# target once.
+# target once, and the global property FIREFLY_TOOLS_EXR (ON: it reads and writes EXR).
 if(TARGET firefly_tools_io)
   return()
 endif()
@@ -11,7 +11,8 @@ find_package(PNG QUIET)
 
 add_library(firefly_tools_io INTERFACE)
 target_include_directories(firefly_tools_io INTERFACE ${CMAKE_CURRENT_LIST_DIR} ${PROJECT_SOURCE_DIR}/bench)
-if(TARGET OpenEXR::OpenEXR)
+if(TARGET OpenEXR::OpenEXR AND TARGET OpenEXR::OpenEXRCore)
+  set_property(GLOBAL PROPERTY FIREFLY_TOOLS_EXR ON)
   target_link_libraries(firefly_tools_io INTERFACE OpenEXR::OpenEXR OpenEXR::OpenEXRCore)
   target_compile_definitions(firefly_tools_io INTERFACE FIREFLY_HAVE_OPENEXR)
   find_package(PkgConfig QUIET)
@@ -27,7 +28,8 @@ if(TARGET OpenEXR::OpenEXR)
     message(STATUS "firefly: libdeflate not found: the tools pack EXR's ZIP chunks with zlib, ~2x slower (apt-get install libdeflate-dev pkg-config)")
   endif()
 else()
-  message(STATUS "firefly: OpenEXR not found: the firefly command-line tool is not built and the demo writes no EXR (apt-get install libopenexr-dev)")
+  set_property(GLOBAL PROPERTY FIREFLY_TOOLS_EXR OFF)
+  message(STATUS "firefly: OpenEXR (>= 3.1, with its core library) not found: the firefly command-line tool is not built and the demo writes no EXR (apt-get install libopenexr-dev)")
 endif()
 if(PNG_FOUND)
   target_link_libraries(firefly_tools_io INTERFACE PNG::PNG)
