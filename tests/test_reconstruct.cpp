@@ -202,6 +202,24 @@ TEST_CASE("unmarked pixels are never changed, bit for bit", "[reconstruct]") {
     }
 }
 
+TEST_CASE("sources near DBL_MAX of either sign give a finite mean, never inf - inf", "[reconstruct]") {
+    // A double frame (the fuzz target's reproducer rebuild_sum_overflows_near_dbl_max): the
+    // plain weighted sums overflow to +inf and -inf and their sum is NaN.
+    const int w = 5, h = 3;
+    std::vector<double> px(static_cast<std::size_t>(w * h));
+    for (int i = 0; i < w * h; ++i) px[static_cast<std::size_t>(i)] = (i % 3 == 0) ? -DBL_MAX : DBL_MAX;
+    std::vector<std::uint8_t> mask(px.size(), 0);
+    mask[7] = 1;  // the centre (2, 1)
+    reconstruct_scratch s;
+    const reconstruct_report r = reconstruct(*make_image_view(px.data(), w, h, 1), image_view<double>(), mask.data(), {}, s);
+    REQUIRE(r.error.ok());
+    CHECK(std::isfinite(px[7]));
+    for (double& v : px) v = DBL_MAX;  // all at the top: the mean is DBL_MAX itself, not inf
+    (void)reconstruct(*make_image_view(px.data(), w, h, 1), image_view<double>(), mask.data(), {}, s);
+    CHECK(px[7] == Approx(DBL_MAX));
+    CHECK(std::isfinite(px[7]));
+}
+
 TEST_CASE("options are checked", "[reconstruct]") {
     reconstruct_options o;
     o.kernel_width = 4;

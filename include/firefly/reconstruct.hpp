@@ -28,6 +28,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -264,7 +265,29 @@ private:
             acc);
         if (!(wsum > 0)) return false;
         double* out = &s_.staged_[e * stride()];
+        bool finite = true;
+        for (int c = 0; c < nch_; ++c) finite = finite && std::isfinite(acc[c]);
+        if (!finite) return filter_scaled<NC>(x, y, wsum, out);
         for (int c = 0; c < nch_; ++c) out[c] = acc[c] / wsum;
+        return true;
+    }
+    // The same mean where the plain sums overflowed (double sources near DBL_MAX, of either
+    // sign: inf, or inf - inf = NaN): the sources scaled by 2^-128 (exact for all but values
+    // far below any that overflow), the mean scaled back and held within the finite range.
+    template <int NC>
+    bool filter_scaled(int x, int y, double wsum, double* out) {
+        double acc[16] = {};
+        (void)kernel_sum<NC>(
+            s_.kernel_, x, y, w_, h_, nch_, [this](int xx, int yy) { return readable(xx, yy); },
+            [this](int xx, int yy, double* v) {
+                for (int c = 0; c < (NC > 0 ? NC : nch_); ++c) v[c] = std::ldexp(load(xx, yy, c), -128);
+            },
+            acc);
+        for (int c = 0; c < nch_; ++c) {
+            const double m = std::ldexp(acc[c] / wsum, 128);
+            out[c] = m == m ? std::clamp(m, -DBL_MAX, DBL_MAX) : 0.0;  // NaN only from an infinite
+                                                                       // source, which no rebuild leaves
+        }
         return true;
     }
     bool filter_any(std::size_t e) {
