@@ -277,7 +277,7 @@ inline exr_chunk_layout exr_layout_of(const Imf::Header& header, const std::vect
     const Imf::Compression c = header.compression();
     if (header.hasTileDescription() || (header.hasType() && header.type() != Imf::SCANLINEIMAGE)) return l;
     if (c != Imf::NO_COMPRESSION && c != Imf::ZIPS_COMPRESSION && c != Imf::ZIP_COMPRESSION) return l;
-    if (!(std::uint16_t{1} == 1 && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__)) return l;
+    if (__BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__) return l;  // the chunks' bytes are little-endian
     std::size_t pixel_bytes = 0;
     for (auto it = header.channels().begin(); it != header.channels().end(); ++it) {
         const Imf::Channel& ch = it.channel();
@@ -393,13 +393,13 @@ inline std::string read_exr(Imf::IStream& in, std::uint64_t stream_bytes, const 
         const Imath::Box2i disp = file.header().displayWindow();
         out.data_window = {dw.min.x, dw.min.y, dw.max.x, dw.max.y};
         out.display_window = {disp.min.x, disp.min.y, disp.max.x, disp.max.y};
-        // Slice::Make places the window's origin with integer (not pointer) arithmetic, so
-        // windows far from (0, 0) address nothing outside the buffer.
         const exr_chunk_layout layout = exr_layout_of(file.header(), names, static_cast<int>(w));
         if (layout.lines_per_chunk > 0) {
             const std::string e = exr_read_chunks(file, layout, dw, nc, out);
             return e.empty() ? e : name + ": " + e;
         }
+        // Slice::Make places the window's origin with integer (not pointer) arithmetic, so
+        // windows far from (0, 0) address nothing outside the buffer.
         Imf::FrameBuffer fb;
         for (std::size_t c = 0; c < nc; ++c)
             fb.insert(names[c].c_str(), Imf::Slice::Make(Imf::FLOAT, out.pixels.data() + c, dw, nc * sizeof(float),
@@ -532,8 +532,41 @@ inline void exr_gather_chunk(const image& img, const std::vector<std::size_t>& o
         }
 }
 
-// Writes all channels of `img` as 32-bit float EXR (ZIP compression) to a stream: the chunks
-// packed on OpenEXR's thread pool a batch at a time (exr_zip.hpp), written in order.
+// Every chunk (ZIP: 16 lines) of `img`, packed on OpenEXR's thread pool a batch at a time
+// (exr_zip.hpp) and handed to the core in order; false (with the sink's message) on failure.
+inline bool exr_write_chunks(exr_context_t ctxt, const image& img, const std::vector<std::size_t>& order, int y_min,
+                             exr_core_sink& sink) {
+    const int lines = exr_zip::lines_zip;
+    const std::size_t chunks = static_cast<std::size_t>((img.height + lines - 1) / lines);
+    const std::size_t batch = 4 * static_cast<std::size_t>(std::max(1, IlmThread::ThreadPool::globalThreadPool().numThreads()));
+    std::vector<std::vector<std::uint8_t>> packed(batch);
+    std::vector<unsigned char> failed(batch, 0);
+    for (std::size_t first = 0; first < chunks; first += batch) {
+        const std::size_t count = std::min(batch, chunks - first);
+        const bool ran = on_exr_pool(count, [&](std::size_t a, std::size_t b) {
+            exr_zip::codec codec;
+            std::vector<std::uint8_t> raw;
+            for (std::size_t i = a; i < b; ++i) {
+                const int y0 = static_cast<int>(first + i) * lines;
+                exr_gather_chunk(img, order, y0, std::min(lines, img.height - y0), raw);
+                failed[i] = !codec.pack(raw.data(), raw.size(), packed[i]);
+            }
+        });
+        for (std::size_t i = 0; i < count; ++i) {
+            if (!ran || failed[i]) {
+                sink.error = "out of memory";
+                return false;
+            }
+            if (exr_write_scanline_chunk(ctxt, 0, y_min + static_cast<int>(first + i) * lines, packed[i].data(),
+                                         packed[i].size()) != EXR_ERR_SUCCESS)
+                return false;
+        }
+    }
+    return true;
+}
+
+// Writes all channels of `img` as 32-bit float EXR (ZIP compression) to a stream, through
+// OpenEXR's core library (header, chunk placement, offset table) and exr_write_chunks.
 inline std::string write_exr(Imf::OStream& os, const image& img) {
     const std::string name = os.fileName();
     const Imath::Box2i origin({0, 0}, {img.width - 1, img.height - 1});
@@ -561,32 +594,11 @@ inline std::string write_exr(Imf::OStream& os, const image& img) {
     exr_context_t ctxt = nullptr;
     if (exr_start_write(&ctxt, name.c_str(), EXR_WRITE_FILE_DIRECTLY, &init) != EXR_ERR_SUCCESS)
         return name + ": " + (sink.error.empty() ? "cannot start writing" : sink.error);
-    bool ok = exr_core_header(ctxt, img, dw, sorted);
-    const int lines = exr_zip::lines_zip;
-    const std::size_t chunks = static_cast<std::size_t>((img.height + lines - 1) / lines);
-    const std::size_t batch = 4 * static_cast<std::size_t>(std::max(1, IlmThread::ThreadPool::globalThreadPool().numThreads()));
-    std::vector<std::vector<std::uint8_t>> packed(batch);
-    std::vector<unsigned char> failed(batch, 0);
-    for (std::size_t first = 0; ok && first < chunks; first += batch) {
-        const std::size_t count = std::min(batch, chunks - first);
-        const bool ran = on_exr_pool(count, [&](std::size_t a, std::size_t b) {
-            exr_zip::codec codec;
-            std::vector<std::uint8_t> raw;
-            for (std::size_t i = a; i < b; ++i) {
-                const int y0 = static_cast<int>(first + i) * lines;
-                exr_gather_chunk(img, order, y0, std::min(lines, img.height - y0), raw);
-                failed[i] = !codec.pack(raw.data(), raw.size(), packed[i]);
-            }
-        });
-        for (std::size_t i = 0; ok && i < count; ++i) {
-            if (!ran || failed[i]) {
-                sink.error = "out of memory";
-                ok = false;
-            } else {
-                ok = exr_write_scanline_chunk(ctxt, 0, dw.min.y + static_cast<int>(first + i) * lines, packed[i].data(),
-                                              packed[i].size()) == EXR_ERR_SUCCESS;
-            }
-        }
+    bool ok = false;
+    try {  // the context is finished whatever happens
+        ok = exr_core_header(ctxt, img, dw, sorted) && exr_write_chunks(ctxt, img, order, dw.min.y, sink);
+    } catch (const std::exception& e) {
+        if (sink.error.empty()) sink.error = e.what();
     }
     const bool finished = exr_finish(&ctxt) == EXR_ERR_SUCCESS;
     if (ok && finished && sink.error.empty()) return {};
