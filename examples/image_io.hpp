@@ -224,6 +224,11 @@ inline std::string exr_header_check(Imf::IStream& in, std::uint64_t stream_bytes
     return {};
 }
 
+// The threads of OpenEXR's global pool (set_exr_threads), at least 1: the calling thread.
+inline std::size_t exr_pool_threads() {
+    return static_cast<std::size_t>(std::max(1, IlmThread::ThreadPool::globalThreadPool().numThreads()));
+}
+
 // Runs fn(first, last) over [0, count) in bands on OpenEXR's global thread pool (set by
 // set_exr_threads; with no threads the bands run here, in order). False when a band threw
 // (out of memory): an exception must not leave a task (a pool thread would terminate, and
@@ -247,8 +252,7 @@ bool on_exr_pool(std::size_t count, const Fn& fn) {
         std::size_t a_, b_;
         unsigned char& failed_;
     };
-    const std::size_t threads = static_cast<std::size_t>(std::max(1, IlmThread::ThreadPool::globalThreadPool().numThreads()));
-    const std::size_t bands = std::min(count, threads * 4);
+    const std::size_t bands = std::min(count, exr_pool_threads() * 4);
     std::vector<unsigned char> failed(bands, 0);
     {
         IlmThread::TaskGroup group;  // its destructor waits for every band
@@ -538,7 +542,7 @@ inline bool exr_write_chunks(exr_context_t ctxt, const image& img, const std::ve
                              exr_core_sink& sink) {
     const int lines = exr_zip::lines_zip;
     const std::size_t chunks = static_cast<std::size_t>((img.height + lines - 1) / lines);
-    const std::size_t batch = 4 * static_cast<std::size_t>(std::max(1, IlmThread::ThreadPool::globalThreadPool().numThreads()));
+    const std::size_t batch = 4 * exr_pool_threads();
     std::vector<std::vector<std::uint8_t>> packed(batch);
     std::vector<unsigned char> failed(batch, 0);
     for (std::size_t first = 0; first < chunks; first += batch) {
