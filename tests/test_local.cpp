@@ -662,6 +662,45 @@ TEST_CASE("local test: the neighbourhood's lower level", "[local]") {
     }
 }
 
+TEST_CASE("local test: the level of a line through a pixel", "[local]") {
+    const int w = 3, h = 3;
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    std::vector<double> level[2] = {std::vector<double>(9, 1.0), std::vector<double>(9, 1.0)};
+    SECTION("each direction: both ends by their lower halves, the best direction") {
+        for (const int dir : {0, 1, 2, 3}) {  // row, column, diagonal, anti-diagonal
+            const int ends[4][2] = {{3, 5}, {1, 7}, {0, 8}, {2, 6}};
+            std::vector<double> l[2] = {level[0], level[1]};
+            l[0][static_cast<std::size_t>(ends[dir][0])] = 6.0, l[1][static_cast<std::size_t>(ends[dir][0])] = 5.0;
+            l[0][static_cast<std::size_t>(ends[dir][1])] = 4.0, l[1][static_cast<std::size_t>(ends[dir][1])] = 7.0;
+            l[0][4] = l[1][4] = 1e30;  // the pixel itself plays no part
+            INFO("direction " << dir);
+            CHECK(detail::neighbourhood_line_level(l, w, h, 1, 1) == 4.0);  // min(min(6, 5), min(4, 7))
+        }
+    }
+    SECTION("a lone bright neighbour, or a firefly in one half of both ends, lifts no direction") {
+        level[0][3] = level[1][3] = 50.0;  // one end of the row only
+        CHECK(detail::neighbourhood_line_level(level, w, h, 1, 1) == 1.0);
+        level[0][1] = 1e30;  // the column's ends each with a firefly in one half
+        level[1][7] = 1e30;
+        CHECK(detail::neighbourhood_line_level(level, w, h, 1, 1) == 1.0);
+    }
+    SECTION("1e-3 next to 1e30: exact, finite") {
+        level[0][0] = level[1][0] = level[0][8] = level[1][8] = 1e-3;
+        for (const std::size_t j : {1, 2, 3, 5, 6, 7}) level[0][j] = level[1][j] = 1e-3;
+        level[0][3] = level[1][3] = level[0][5] = level[1][5] = 1e30;
+        CHECK(detail::neighbourhood_line_level(level, w, h, 1, 1) == 1e30);
+    }
+    SECTION("the frame's edge and unusable neighbours leave directions out; none gives NaN") {
+        CHECK(detail::neighbourhood_line_level(level, w, h, 0, 1) == 1.0);  // the column only
+        CHECK(std::isnan(detail::neighbourhood_line_level(level, w, h, 0, 0)));  // a corner: none
+        CHECK(std::isnan(detail::neighbourhood_line_level(level, 1, 1, 0, 0)));  // 1x1
+        level[1][0] = nan;                                                       // the column's top
+        CHECK(std::isnan(detail::neighbourhood_line_level(level, w, h, 0, 1)));
+        level[0][3] = 9.0, level[1][3] = 8.0, level[0][5] = level[1][5] = 3.0;  // the row still counts
+        CHECK(detail::neighbourhood_line_level(level, w, h, 1, 1) == 3.0);
+    }
+}
+
 TEST_CASE("local test: the neighbourhood's lower halves' noise", "[local]") {
     const int w = 3, h = 3;
     local_test_scratch s;

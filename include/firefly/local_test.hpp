@@ -520,6 +520,31 @@ inline double neighbourhood_lower_level(const std::vector<double> (&level)[2], i
     }, count, mad_out);
 }
 
+// The level of a line through (x, y): over the four directions (the row, the column, both
+// diagonals), the largest of min(lower(q1), lower(q2)), q1 and q2 the two neighbours opposite
+// each other and lower(q) the lower of q's two halves. A line of detail one pixel wide has only
+// two of its eight neighbours at its level, so the neighbourhood's median is the background's;
+// both ends of the line are at the line's level, while on a smooth region a lone bright
+// neighbour (a firefly) lifts no direction. NaN when no direction has both neighbours usable.
+inline double neighbourhood_line_level(const std::vector<double> (&level)[2], int w, int h, int x, int y) noexcept {
+    const double *l0 = level[0].data(), *l1 = level[1].data();
+    auto lower = [&](int xx, int yy) {
+        if (xx < 0 || yy < 0 || xx >= w || yy >= h) return std::numeric_limits<double>::quiet_NaN();
+        const std::size_t j = static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(xx);
+        const double a = l0[j], b = l1[j];
+        return a == a && b == b ? std::min(a, b) : std::numeric_limits<double>::quiet_NaN();
+    };
+    static constexpr int dirs[4][2] = {{1, 0}, {0, 1}, {1, 1}, {1, -1}};
+    double best = std::numeric_limits<double>::quiet_NaN();
+    for (const auto& d : dirs) {
+        const double a = lower(x + d[0], y + d[1]), b = lower(x - d[0], y - d[1]);
+        if (!(a == a && b == b)) continue;
+        const double m = std::min(a, b);
+        if (!(best >= m)) best = m;
+    }
+    return best;
+}
+
 // The median over the neighbourhood (centre excluded) of the relative variance of each
 // neighbour's lower half (the half with the lower level): the neighbourhood's noise, clean
 // where fireflies are dense (a firefly lands in one half and lifts that half's r with its

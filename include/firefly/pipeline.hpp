@@ -283,6 +283,7 @@ private:
     struct neighbourhood {             // neighbourhood_at
         detail::pooled_estimate pooled;  // the local test's r~ at the pixel
         double around = 0;               // the neighbourhood's level (noise_floor)
+        double line = 0;                 // a line's through the pixel, as `around` (0: none)
         double spread = 0;               // its lower halves' MAD over their median
         double lower_noise = std::numeric_limits<double>::quiet_NaN();  // pairs: the lower halves' r
         std::size_t lower_count = 0;     // ... over this many neighbours
@@ -855,6 +856,13 @@ private:
     // changed -> 3 / 2 / 16 / 50 (at 16: 75 of 320 over seeds 1-160, twice alpha), the
     // renders and simulated scenes within 0.1%. (A small neighbourhood's MAD may call a smooth
     // one mixed by chance: the level there is then the geometric mean, also the null's.)
+    // The same where a line runs through the pixel (neighbourhood_line_level: both neighbours
+    // of one direction, each by its lower half, more than three standard deviations above
+    // the neighbourhood): a line one pixel wide has two of its eight neighbours at its level,
+    // so the median is the background's, and where the other half drew low it is no sign of
+    // detail either; the line's two ends are independent of the pixel's halves (no selection).
+    // At 4 samples per half (1024x540, gamma of shape 1): clean pixel-halves lowered 0.097% ->
+    // 0.071%, highlights kept 0.9956 -> 0.9967; dense30 0.3625 -> 0.3636.
     // A firefly on detail is still far above both (100x: the geometric mean is 10x the other
     // half), and on smooth regions nothing changes (the Cycles renders within 0.5%). Renderer
     // units, like v.
@@ -867,7 +875,8 @@ private:
         // neighbourhood gives (0.6745 x 0.826 sqrt(t): the MAD of a normal's, and the sd of the
         // lower of two normal draws, relative terms)
         const bool mixed = nb.spread > 3.0 * 0.6745 * 0.8257 * std::sqrt(t);
-        if (l_other > 0 && l_out > l_other && (mixed || nb.around * std::exp(3.0 * std::sqrt(t)) < l_other))
+        const double detail_above = nb.around * std::exp(3.0 * std::sqrt(t));  // 3 sd above the neighbourhood
+        if (l_other > 0 && l_out > l_other && (mixed || detail_above < l_other || detail_above < nb.line))
             level = std::sqrt(l_out) * std::sqrt(l_other);  // detail (l_other > 0 here)
         return std::max(v, t * level * level / calibration);
     }
@@ -888,7 +897,10 @@ private:
         const double med = detail::neighbourhood_lower_level(ls.level, w, h, x, y, options_.local.radius,
                                                              (options_.local.min_neighbours + 1) / 2, pool, &mad);
         nb.spread = med > 0 ? mad / med : 0.0;
-        nb.around = med * std::exp(std::min(0.5449521356 * std::sqrt(t) + 0.5 * t, 700.0));
+        const double bias = std::exp(std::min(0.5449521356 * std::sqrt(t) + 0.5 * t, 700.0));
+        nb.around = med * bias;
+        const double line = detail::neighbourhood_line_level(ls.level, w, h, x, y);
+        nb.line = line == line ? line * bias : 0.0;
         if (pair)
             nb.lower_noise = detail::neighbourhood_lower_noise(ls, w, h, x, y, options_.local.radius,
                                                                (options_.local.min_neighbours + 1) / 2, pool, nb.lower_count);
