@@ -340,11 +340,12 @@ TEST_CASE("one thread and two threads give bit-identical outputs", "[pipeline][i
                         for (std::size_t i = n; i-- > 0;) t(i);  // reverse order on purpose
                     }));
     (void)hooked.process(c.h[0], c.h[1]);
-    CHECK(calls == 17);  // candidates, the local test (levels, bands of rows), what to rebuild,
+    CHECK(calls == 19);  // candidates, the local test (levels, bands of rows), what to rebuild,
                          // the other half's estimates, the colour before the rebuild, the
                          // writes; per half, the energy return's median, node rows (y first:
                          // the frame is wider than high), the coarse scale's cell sums and its
-                         // Gaussian's two passes (runs of one task run inline, unhooked)
+                         // Gaussian's two passes, the return's rows (runs of one task run
+                         // inline, unhooked)
     CHECK(std::memcmp(a.f.color[0].data(), c.f.color[0].data(), a.f.color[0].size() * 4) == 0);
 }
 

@@ -169,17 +169,36 @@ inline tap_pair taps_at(int p2, int d, bool half, int n) noexcept {
     return {p2 - o2 >= 0 && lo < n ? lo : -1, hi >= 0 && hi < n ? hi : -1};
 }
 
-// The median of 3 values.
-inline double median3(double a, double b, double c) noexcept {
-    return std::max(std::min(a, b), std::min(std::max(a, b), c));
+// The median of the 3x3 windows of three rows of n values (3 interleaved channels: the window
+// of value i takes i - 3, i, i + 3 of each row), at i in [3, n - 3), into o. Each column of 3 is
+// sorted once and the median of the 9 is the median of (the largest column minimum, the median
+// column median, the smallest column maximum): min and max only select, so the value is the
+// 9's median exactly. lo, mid, hi: scratch of n values. (Loops split so that each vectorises:
+// few arrays to check for overlap, one type.)
+template <class M>
+inline void median3x3_interior(const M* up, const M* here, const M* down, std::size_t n, M* lo, M* mid, M* hi,
+                               M* o) {
+    for (std::size_t i = 0; i < n; ++i) {
+        lo[i] = std::min(std::min(up[i], here[i]), down[i]);
+        hi[i] = std::max(std::max(up[i], here[i]), down[i]);
+    }
+    for (std::size_t i = 0; i < n; ++i)
+        mid[i] = std::max(std::min(up[i], here[i]), std::min(std::max(up[i], here[i]), down[i]));
+    for (std::size_t i = 3; i + 3 < n; ++i) {
+        const M l = std::max(std::max(lo[i - 3], lo[i]), lo[i + 3]);
+        const M u = std::min(std::min(hi[i - 3], hi[i]), hi[i + 3]);
+        const M m0 = mid[i - 3], m1 = mid[i], m2 = mid[i + 3];
+        const M m = std::max(std::min(m0, m1), std::min(std::max(m0, m1), m2));
+        o[i] = std::max(std::min(l, m), std::min(std::max(l, m), u));
+    }
 }
 
 // 3x3 median of each of 3 interleaved channels of a w x h image whose rows `fill_row(y, out)`
 // writes (3 w finite values) into `out` (the frame's edge: the pixels inside it, the mean of
-// the middle two where they are even in number). Inside the frame, each column of 3 is sorted
-// once and the median of the 9 is the median of (the largest column minimum, the median
-// column median, the smallest column maximum): min and max only select, so the value is the
-// 9's median exactly. Rows are made as needed: no frame-sized copy of the input.
+// the middle two where they are even in number; inside it median3x3_interior). Rows are made
+// as needed: no frame-sized copy of the input. Inside the frame the values are first taken to
+// T (held at T's largest): rounding is monotone, so the median of the rounded values is the
+// rounded median, and a float profile is selected in float lanes (twice as many a register).
 template <class T, class FillRow>
 inline void median3x3_rows(FillRow&& fill_row, std::vector<T>& out, int w, int h, const executor& exec) {
     // a median past the range of T (a float profile of a 2 FLT_MAX sum) is kept at its largest
@@ -189,16 +208,24 @@ inline void median3x3_rows(FillRow&& fill_row, std::vector<T>& out, int w, int h
     out.resize(n * static_cast<std::size_t>(h));
     // Bands of rows as tasks; in a band each input row is made once, into a ring of three
     // (per thread, kept: a row's allocation freed and taken again costs page faults when the
-    // allocator returns it to the system).
+    // allocator returns it to the system), as double (the edges) and as T (the interior).
     constexpr int band = 16;
     exec.run(static_cast<std::size_t>((h + band - 1) / band), [&](std::size_t bi) {
-        thread_local std::vector<double> ring, lo, mid, hi, median;
-        ring.resize(3 * n);
+        thread_local std::vector<double> ring;
+        thread_local std::vector<T> ring_t, lo, mid, hi;
+        ring.resize(3 * n), ring_t.resize(3 * n), lo.resize(n), mid.resize(n), hi.resize(n);
         auto line = [&](int yy) { return &ring[static_cast<std::size_t>(yy % 3) * n]; };
+        auto line_t = [&](int yy) { return &ring_t[static_cast<std::size_t>(yy % 3) * n]; };
+        auto make = [&](int yy) {
+            double* r = line(yy);
+            fill_row(yy, r);
+            T* t = line_t(yy);
+            for (std::size_t i = 0; i < n; ++i) t[i] = put(r[i]);
+        };
         const int first = static_cast<int>(bi) * band, last = std::min(h, first + band);
-        for (int yy = std::max(0, first - 1); yy <= std::min(h - 1, first); ++yy) fill_row(yy, line(yy));
+        for (int yy = std::max(0, first - 1); yy <= std::min(h - 1, first); ++yy) make(yy);
         for (int y = first; y < last; ++y) {
-            if (y + 1 < h) fill_row(y + 1, line(y + 1));
+            if (y + 1 < h) make(y + 1);
             const int y0 = std::max(0, y - 1), y1 = std::min(h - 1, y + 1);
             T* o = &out[static_cast<std::size_t>(y) * n];
             auto edge = [&](int x, int c) {
@@ -217,23 +244,7 @@ inline void median3x3_rows(FillRow&& fill_row, std::vector<T>& out, int w, int h
                     for (int c = 0; c < 3; ++c) o[static_cast<std::size_t>(x) * 3 + static_cast<std::size_t>(c)] = put(edge(x, c));
                 continue;
             }
-            lo.resize(n), mid.resize(n), hi.resize(n), median.resize(n);  // each column of 3, sorted
-            const double* up = line(y - 1);
-            const double* here = line(y);
-            const double* down = line(y + 1);
-            // (loops split so that each vectorises: few arrays to check for overlap, one type)
-            for (std::size_t i = 0; i < n; ++i) {
-                lo[i] = std::min(std::min(up[i], here[i]), down[i]);
-                hi[i] = std::max(std::max(up[i], here[i]), down[i]);
-            }
-            for (std::size_t i = 0; i < n; ++i)
-                mid[i] = std::max(std::min(up[i], here[i]), std::min(std::max(up[i], here[i]), down[i]));
-            for (std::size_t i = 3; i + 3 < n; ++i) {
-                const double l = std::max(std::max(lo[i - 3], lo[i]), lo[i + 3]);
-                const double u = std::min(std::min(hi[i - 3], hi[i]), hi[i + 3]);
-                median[i] = largest(median3(l, median3(mid[i - 3], mid[i], mid[i + 3]), u));
-            }
-            for (std::size_t i = 3; i + 3 < n; ++i) o[i] = static_cast<T>(median[i]);
+            median3x3_interior(line_t(y - 1), line_t(y), line_t(y + 1), n, lo.data(), mid.data(), hi.data(), o);
             for (int c = 0; c < 3; ++c) {
                 o[c] = put(edge(0, c));
                 o[static_cast<std::size_t>(w - 1) * 3 + static_cast<std::size_t>(c)] = put(edge(w - 1, c));
@@ -295,6 +306,7 @@ struct energy_scratch {
     std::vector<double> factor;         // the nodes: the return's share of the profile, 3
     detail::node_axis ax, ay;           // where the nodes are
     std::vector<std::uint32_t> order;   // return_energy_to_image: its list in pixel order
+    std::vector<double> row_returned;   // return_energy_to_image: each row's light added
     std::vector<double> cells, coarse;  // the coarse scale: cell sums, their Gaussian (empty: off)
     detail::cell_axis cx, cy;           // where the cells are
     double coarse_var_scale = 0;        // sum w_fine^2 / sum w_coarse^2 (per pixel weights)
@@ -302,7 +314,7 @@ struct energy_scratch {
     std::size_t bytes() const noexcept {
         return profile.capacity() * sizeof(float) + where.bytes() +
                (xy.capacity() + factor.capacity() + cells.capacity() + coarse.capacity()) * sizeof(double) +
-               order.capacity() * sizeof(std::uint32_t);
+               row_returned.capacity() * sizeof(double) + order.capacity() * sizeof(std::uint32_t);
     }
 };
 
@@ -1076,10 +1088,11 @@ energy_totals return_energy_to_image(const image_view<C>& color, const std::uint
     detail::energy_model_mapped(shape_row, w, h, sigma, s, exec);
     // row-major, as over every pixel: the others' excess is +0 and adds nothing (excess_map)
     for (const detail::excess_pixel& e : s.where.pixels) t.removed += (e.v[0] + e.v[1] + e.v[2]) / 3.0;
-    detail::energy_rows rows(s);
-    std::vector<double> row_add(static_cast<std::size_t>(w) * 3);
-    for (int y = 0; y < h; ++y) {
-        rows.row(y, row_add.data());
+    // bands of rows across the executor (distinct pixels); each row's total kept, summed in
+    // row order after: the same bits for any executor
+    s.row_returned.assign(static_cast<std::size_t>(h), 0.0);
+    detail::for_each_energy_row(s, w, h, exec, [&](int y, const double* row_add) {
+        double sum = 0;
         for (int x = 0; x < w; ++x) {
             const std::size_t p = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
             const double* add = &row_add[static_cast<std::size_t>(x) * 3];
@@ -1091,10 +1104,12 @@ energy_totals return_energy_to_image(const image_view<C>& color, const std::uint
                 restore_light(color, x, y, old, add);
                 continue;
             }
-            t.returned += mean_add;
+            sum += mean_add;
             if (added) added[p] = 1;
         }
-    }
+        s.row_returned[static_cast<std::size_t>(y)] = sum;
+    });
+    for (const double r : s.row_returned) t.returned += r;
     return t;
 }
 
