@@ -663,41 +663,47 @@ TEST_CASE("local test: the neighbourhood's lower level", "[local]") {
 }
 
 TEST_CASE("local test: the level of a line through a pixel", "[local]") {
-    const int w = 3, h = 3;
+    const int w = 5, h = 5;
     const double nan = std::numeric_limits<double>::quiet_NaN();
-    std::vector<double> level[2] = {std::vector<double>(9, 1.0), std::vector<double>(9, 1.0)};
-    SECTION("each direction: both ends by their lower halves, the best direction") {
-        for (const int dir : {0, 1, 2, 3}) {  // row, column, diagonal, anti-diagonal
-            const int ends[4][2] = {{3, 5}, {1, 7}, {0, 8}, {2, 6}};
-            std::vector<double> l[2] = {level[0], level[1]};
-            l[0][static_cast<std::size_t>(ends[dir][0])] = 6.0, l[1][static_cast<std::size_t>(ends[dir][0])] = 5.0;
-            l[0][static_cast<std::size_t>(ends[dir][1])] = 4.0, l[1][static_cast<std::size_t>(ends[dir][1])] = 7.0;
-            l[0][4] = l[1][4] = 1e30;  // the pixel itself plays no part
-            INFO("direction " << dir);
-            CHECK(detail::neighbourhood_line_level(l, w, h, 1, 1) == 4.0);  // min(min(6, 5), min(4, 7))
+    std::vector<double> level[2] = {std::vector<double>(25, 1.0), std::vector<double>(25, 1.0)};
+    auto at = [&](int x, int y) { return static_cast<std::size_t>(y * w + x); };
+    auto set = [&](int x, int y, double a, double b) { level[0][at(x, y)] = a, level[1][at(x, y)] = b; };
+    SECTION("each direction: the second smallest lower half of the four pixels along it") {
+        const int dirs[4][2] = {{1, 0}, {0, 1}, {1, 1}, {1, -1}};  // row, column, both diagonals
+        for (const auto& d : dirs) {
+            std::vector<double> keep[2] = {level[0], level[1]};
+            set(2 + d[0], 2 + d[1], 6.0, 5.0);          // lower 5
+            set(2 - d[0], 2 - d[1], 4.0, 7.0);          // lower 4
+            set(2 + 2 * d[0], 2 + 2 * d[1], 9.0, 8.0);  // lower 8
+            set(2 - 2 * d[0], 2 - 2 * d[1], 0.5, 9.0);  // one low draw: passed over
+            set(2, 2, 1e30, 1e30);                      // the pixel itself plays no part
+            INFO("direction " << d[0] << "," << d[1]);
+            CHECK(detail::neighbourhood_line_level(level, w, h, 2, 2) == 4.0);  // of 0.5, 4, 5, 8
+            level[0] = keep[0], level[1] = keep[1];
         }
     }
-    SECTION("a lone bright neighbour, or a firefly in one half of both ends, lifts no direction") {
-        level[0][3] = level[1][3] = 50.0;  // one end of the row only
-        CHECK(detail::neighbourhood_line_level(level, w, h, 1, 1) == 1.0);
-        level[0][1] = 1e30;  // the column's ends each with a firefly in one half
-        level[1][7] = 1e30;
-        CHECK(detail::neighbourhood_line_level(level, w, h, 1, 1) == 1.0);
+    SECTION("two bright pixels on a direction, or fireflies in one half, lift it not") {
+        set(1, 2, 50.0, 50.0);  // both neighbours of the row, but not the row on
+        set(3, 2, 50.0, 50.0);
+        CHECK(detail::neighbourhood_line_level(level, w, h, 2, 2) == 1.0);
+        for (const int y : {0, 1, 3, 4}) set(2, y, y % 2 ? 1e30 : 1.0, y % 2 ? 1.0 : 1e30);  // the column
+        CHECK(detail::neighbourhood_line_level(level, w, h, 2, 2) == 1.0);
     }
     SECTION("1e-3 next to 1e30: exact, finite") {
-        level[0][0] = level[1][0] = level[0][8] = level[1][8] = 1e-3;
-        for (const std::size_t j : {1, 2, 3, 5, 6, 7}) level[0][j] = level[1][j] = 1e-3;
-        level[0][3] = level[1][3] = level[0][5] = level[1][5] = 1e30;
-        CHECK(detail::neighbourhood_line_level(level, w, h, 1, 1) == 1e30);
+        for (double& v : level[0]) v = 1e-3;
+        for (double& v : level[1]) v = 1e-3;
+        for (const int x : {0, 1, 3, 4}) set(x, 2, 1e30, 1e30);
+        CHECK(detail::neighbourhood_line_level(level, w, h, 2, 2) == 1e30);
     }
-    SECTION("the frame's edge and unusable neighbours leave directions out; none gives NaN") {
-        CHECK(detail::neighbourhood_line_level(level, w, h, 0, 1) == 1.0);  // the column only
-        CHECK(std::isnan(detail::neighbourhood_line_level(level, w, h, 0, 0)));  // a corner: none
-        CHECK(std::isnan(detail::neighbourhood_line_level(level, 1, 1, 0, 0)));  // 1x1
-        level[1][0] = nan;                                                       // the column's top
-        CHECK(std::isnan(detail::neighbourhood_line_level(level, w, h, 0, 1)));
-        level[0][3] = 9.0, level[1][3] = 8.0, level[0][5] = level[1][5] = 3.0;  // the row still counts
-        CHECK(detail::neighbourhood_line_level(level, w, h, 1, 1) == 3.0);
+    SECTION("the frame's edge and unusable pixels leave directions out; none gives NaN") {
+        CHECK(detail::neighbourhood_line_level(level, w, h, 2, 0) == 1.0);         // the row only
+        CHECK(std::isnan(detail::neighbourhood_line_level(level, w, h, 1, 1)));    // no room: none
+        CHECK(std::isnan(detail::neighbourhood_line_level(level, 1, 1, 0, 0)));    // 1x1
+        level[1][at(4, 0)] = nan;                                                   // the row's end
+        CHECK(std::isnan(detail::neighbourhood_line_level(level, w, h, 2, 0)));
+        for (const int y : {0, 1, 3, 4}) set(2, y, 3.0, 3.0);                       // the column
+        level[1][at(2, 4)] = nan;
+        CHECK(detail::neighbourhood_line_level(level, w, h, 2, 2) == 1.0);         // the column is out
     }
 }
 

@@ -199,11 +199,14 @@ inline void median3x3_interior(const M* up, const M* here, const M* down, std::s
 // as needed: no frame-sized copy of the input. Inside the frame the values are first taken to
 // T (held at T's largest): rounding is monotone, so the median of the rounded values is the
 // rounded median, and a float profile is selected in float lanes (twice as many a register).
+// A zero comes out +0 (-0 and a positive double below float's least denormal both round to a
+// zero of T, and a selection among tied zeros could return either sign).
 template <class T, class FillRow>
 inline void median3x3_rows(FillRow&& fill_row, std::vector<T>& out, int w, int h, const executor& exec) {
-    // a median past the range of T (a float profile of a 2 FLT_MAX sum) is kept at its largest
+    // a median past the range of T (a float profile of a 2 FLT_MAX sum) is kept at its largest;
+    // + 0 makes a zero +0
     auto largest = [](double v) { return std::min(v, static_cast<double>(std::numeric_limits<T>::max())); };
-    auto put = [&](double v) { return static_cast<T>(largest(v)); };
+    auto put = [&](double v) { return static_cast<T>(static_cast<T>(largest(v)) + T(0)); };
     const std::size_t n = static_cast<std::size_t>(w) * 3;
     out.resize(n * static_cast<std::size_t>(h));
     // Bands of rows as tasks; in a band each input row is made once, into a ring of three
@@ -216,7 +219,7 @@ inline void median3x3_rows(FillRow&& fill_row, std::vector<T>& out, int w, int h
         ring.resize(3 * n), ring_t.resize(3 * n), lo.resize(n), mid.resize(n), hi.resize(n);
         auto line = [&](int yy) { return &ring[static_cast<std::size_t>(yy % 3) * n]; };
         auto line_t = [&](int yy) { return &ring_t[static_cast<std::size_t>(yy % 3) * n]; };
-        auto make = [&](int yy) {
+        auto make = [&](int yy) {  // (a double image's T ring is a copy with zeros made +0)
             double* r = line(yy);
             fill_row(yy, r);
             T* t = line_t(yy);

@@ -856,13 +856,18 @@ private:
     // changed -> 3 / 2 / 16 / 50 (at 16: 75 of 320 over seeds 1-160, twice alpha), the
     // renders and simulated scenes within 0.1%. (A small neighbourhood's MAD may call a smooth
     // one mixed by chance: the level there is then the geometric mean, also the null's.)
-    // The same where a line runs through the pixel (neighbourhood_line_level: both neighbours
-    // of one direction, each by its lower half, more than three standard deviations above
-    // the neighbourhood): a line one pixel wide has two of its eight neighbours at its level,
-    // so the median is the background's, and where the other half drew low it is no sign of
-    // detail either; the line's two ends are independent of the pixel's halves (no selection).
-    // At 4 samples per half (1024x540, gamma of shape 1): clean pixel-halves lowered 0.097% ->
-    // 0.071%, highlights kept 0.9956 -> 0.9967; dense30 0.3625 -> 0.3636.
+    // The same where a line runs through the pixel (neighbourhood_line_level: along one
+    // direction, the pixels one and two steps away on both sides, by their lower halves, all
+    // but one more than three standard deviations above the neighbourhood): a line one pixel
+    // wide has two of its eight neighbours at its level, so the median is the background's,
+    // and where the other half drew low it is no sign of detail either; the line's pixels are
+    // independent of the pixel's halves (no selection). At 4 samples per half (1024x540, gamma
+    // of shape 1): clean pixel-halves lowered 0.097% -> 0.066%, highlights kept 0.9956 ->
+    // 0.9969. (The two neighbours at one step alone: 0.071%, but where fireflies are dense
+    // two of them meet on both sides of a pixel often enough to make a line: dense30 0.3625
+    // -> 0.3636; with four pixels, 0.3627.) The price: a one-pixel gap in a line is "on" it
+    // too, and a firefly there no brighter than the line is kept (the halves of a line pixel
+    // whose other half drew low); twice the line's level is rebuilt.
     // A firefly on detail is still far above both (100x: the geometric mean is 10x the other
     // half), and on smooth regions nothing changes (the Cycles renders within 0.5%). Renderer
     // units, like v.
