@@ -638,6 +638,19 @@ inline bool paulson_may_exceed(double f, double d1, double d2, double z) noexcep
 
 // P(F > f) for F(d1, d2), f > 0: I_y(d2/2, d1/2) with y = d2 / (d2 + d1 f), by the continued
 // fraction on whichever side converges (the small tails the test asks for come out directly).
+// log Gamma(x) for x > 0 without touching the global `signgam`, which glibc's lgamma writes: the
+// test runs in bands on the caller's threads, and a host renderer's ThreadSanitizer reported
+// that write as a data race. lgamma_r computes the same value (glibc's lgamma is lgamma_r into
+// signgam); elsewhere, or where <math.h> does not declare it (glibc declares it with its
+// __USE_MISC features, on by default), std::lgamma.
+inline double log_gamma_positive(double x) noexcept {
+#if defined(__GLIBC__) && defined(__USE_MISC)
+    int sign = 0;
+    return ::lgamma_r(x, &sign);
+#else
+    return std::lgamma(x);
+#endif
+}
 struct f_tail_terms {  // I_y(a, b) = front cf(a, b, y) / a, front = y^a y1^b / B(a, b)
     double a, b, y, y1, log_front;
     bool direct;  // the continued fraction converges on this side (else on 1 - y)
@@ -646,7 +659,7 @@ inline f_tail_terms f_tail_at(double f, double d1, double d2) noexcept {
     f_tail_terms t;
     t.a = 0.5 * d2, t.b = 0.5 * d1;
     t.y = d2 / (d2 + d1 * f), t.y1 = d1 * f / (d2 + d1 * f);
-    t.log_front = t.a * std::log(t.y) + t.b * std::log(t.y1) - (std::lgamma(t.a) + std::lgamma(t.b) - std::lgamma(t.a + t.b));
+    t.log_front = t.a * std::log(t.y) + t.b * std::log(t.y1) - (log_gamma_positive(t.a) + log_gamma_positive(t.b) - log_gamma_positive(t.a + t.b));
     t.direct = t.y < (t.a + 1.0) / (t.a + t.b + 2.0);
     return t;
 }
