@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs every test of firefly: installs the Debian packages the tests need when they are
 # missing (as root; otherwise prints the apt-get line and stops), then the tests workflow.
-# Usage: ./scripts/test.sh [--sanitize]   (--sanitize: the address/UB-sanitizer workflow)
+# Usage: ./scripts/test.sh [--sanitize | --threads]   (--sanitize: the address/UB-sanitizer
+# workflow; --threads: the unit tests under ThreadSanitizer)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -27,4 +28,5 @@ fi
 
 preset=tests
 [ "${1:-}" = "--sanitize" ] && preset=sanitize
+[ "${1:-}" = "--threads" ] && preset=threads
 cmake --workflow --preset "$preset"
