@@ -636,11 +636,9 @@ inline bool paulson_may_exceed(double f, double d1, double d2, double z) noexcep
     return !(((1.0 - a2) * c - (1.0 - a1)) / std::sqrt(a2 * c * c + a1) < z - 1e-6);
 }
 
-// P(F > f) for F(d1, d2), f > 0: I_y(d2/2, d1/2) with y = d2 / (d2 + d1 f), by the continued
-// fraction on whichever side converges (the small tails the test asks for come out directly).
 // log Gamma(x) for x > 0 without touching the global `signgam`, which glibc's lgamma writes: the
-// test runs in bands on the caller's threads, and a host renderer's ThreadSanitizer reported
-// that write as a data race. lgamma_r computes the same value (glibc's lgamma is lgamma_r into
+// test runs in bands on the caller's threads, and ThreadSanitizer reports that write as a data
+// race (in the threads workflow, and so in a host renderer's TSan build). lgamma_r computes the same value (glibc's lgamma is lgamma_r into
 // signgam); elsewhere, or where <math.h> does not declare it (glibc declares it with its
 // __USE_MISC features, on by default), std::lgamma.
 inline double log_gamma_positive(double x) noexcept {
@@ -651,6 +649,9 @@ inline double log_gamma_positive(double x) noexcept {
     return std::lgamma(x);
 #endif
 }
+
+// P(F > f) for F(d1, d2), f > 0: I_y(d2/2, d1/2) with y = d2 / (d2 + d1 f), by the continued
+// fraction on whichever side converges (the small tails the test asks for come out directly).
 struct f_tail_terms {  // I_y(a, b) = front cf(a, b, y) / a, front = y^a y1^b / B(a, b)
     double a, b, y, y1, log_front;
     bool direct;  // the continued fraction converges on this side (else on 1 - y)
