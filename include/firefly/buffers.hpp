@@ -362,7 +362,7 @@ public:
     detector& pair_detector() noexcept { return pair_; }
     // Work memory kept between frames, bytes (the K = 2 detector's included).
     std::size_t scratch_bytes() const noexcept {
-        return (noise_.capacity() + log_p_.capacity() + excess_.capacity() + row_returned_.capacity()) *
+        return (noise_.capacity() + log_p_.capacity() + excess_.capacity()) *
                    sizeof(double) + level_.capacity() * sizeof(float) + refined_.capacity() +
                energy_.bytes() + pair_.scratch_bytes();
     }
@@ -854,11 +854,11 @@ private:
         };
         energy_model_rows(excess_, shape_row, w, h, energy_scales(options_.energy_sigma, options_.energy_coarse_sigma),
                           energy_, exec_);
-        row_returned_.assign(static_cast<std::size_t>(h), 0.0);
+        energy_.row_returned.assign(static_cast<std::size_t>(h), 0.0);
         if constexpr (!std::is_const_v<C>)
             detail::for_each_energy_row(energy_, w, h, exec_, [&](int y, const double* add) { give_back_row(b, k, y, add); });
         for (std::size_t i = 0; i < excess_.size(); ++i) rep.energy_removed += excess_[i] / 3.0;
-        for (const double r : row_returned_) rep.energy_returned += r;
+        for (const double r : energy_.row_returned) rep.energy_returned += r;
     }
 
     // Row y's return (3 per pixel) added to every buffer alike, or to none where a sum does
@@ -877,7 +877,7 @@ private:
                 for (int i = 0; i < k; ++i) restore_light(b[i].color, x, y, old[i], add);
                 continue;
             }
-            row_returned_[row] += (add[0] + add[1] + add[2]) / 3.0;
+            energy_.row_returned[row] += (add[0] + add[1] + add[2]) / 3.0;
         }
     }
 
@@ -893,7 +893,6 @@ private:
     std::vector<float> level_;   // per pixel: lower_level, its buffers' lower half (NaN: none usable)
     std::vector<std::uint8_t> refined_;  // per pixel: its noise pooled without the buffers flagged at the cap
     std::vector<double> excess_;        // energy return: what was removed, 3 channels per pixel
-    std::vector<double> row_returned_;  // energy return: what was given back, per row
 
     energy_scratch energy_;
 };

@@ -309,7 +309,7 @@ struct energy_scratch {
     std::vector<double> factor;         // the nodes: the return's share of the profile, 3
     detail::node_axis ax, ay;           // where the nodes are
     std::vector<std::uint32_t> order;   // return_energy_to_image: its list in pixel order
-    std::vector<double> row_returned;   // return_energy_to_image: each row's light added
+    std::vector<double> row_returned;   // each row's light added back (summed in row order)
     std::vector<double> cells, coarse;  // the coarse scale: cell sums, their Gaussian (empty: off)
     detail::cell_axis cx, cy;           // where the cells are
     double coarse_var_scale = 0;        // sum w_fine^2 / sum w_coarse^2 (per pixel weights)

@@ -505,6 +505,12 @@ inline double neighbour_median(int w, int h, int x, int y, int radius, int min_c
     return med;
 }
 
+// The lower of pixel j's two half levels, NaN unless both are usable.
+inline double lower_half_level(const std::vector<double> (&level)[2], std::size_t j) noexcept {
+    const double a = level[0][j], b = level[1][j];
+    return a == a && b == b ? std::min(a, b) : std::numeric_limits<double>::quiet_NaN();
+}
+
 // The median over the neighbourhood (centre excluded) of each neighbour's lower half level
 // (mean colour): a firefly lands in one half of a pixel, rarely in both, so the lower half
 // is clean where a quarter of the neighbours' halves carry one (a median over the halves
@@ -512,11 +518,9 @@ inline double neighbour_median(int w, int h, int x, int y, int radius, int min_c
 // NaN when fewer than min_count neighbours have both halves usable.
 inline double neighbourhood_lower_level(const std::vector<double> (&level)[2], int w, int h, int x, int y,
                                         int radius, int min_count, std::vector<float>& pool, double* mad_out = nullptr) {
-    const double *l0 = level[0].data(), *l1 = level[1].data();
     std::size_t count = 0;
     return neighbour_median(w, h, x, y, radius, min_count, pool, [&](std::size_t j) {
-        const double a = l0[j], b = l1[j];
-        return a == a && b == b ? static_cast<float>(std::min(a, b)) : std::numeric_limits<float>::quiet_NaN();
+        return static_cast<float>(lower_half_level(level, j));  // NaN stays NaN
     }, count, mad_out);
 }
 
@@ -530,12 +534,9 @@ inline double neighbourhood_lower_level(const std::vector<double> (&level)[2], i
 // half, 0.3% of directions; both neighbours at one step alone: 0.8%). NaN when no direction has
 // all four usable (the frame's edge, unusable pixels).
 inline double neighbourhood_line_level(const std::vector<double> (&level)[2], int w, int h, int x, int y) noexcept {
-    const double *l0 = level[0].data(), *l1 = level[1].data();
     auto lower = [&](int xx, int yy) {
         if (xx < 0 || yy < 0 || xx >= w || yy >= h) return std::numeric_limits<double>::quiet_NaN();
-        const std::size_t j = static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(xx);
-        const double a = l0[j], b = l1[j];
-        return a == a && b == b ? std::min(a, b) : std::numeric_limits<double>::quiet_NaN();
+        return lower_half_level(level, static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(xx));
     };
     static constexpr int dirs[4][2] = {{1, 0}, {0, 1}, {1, 1}, {1, -1}};
     double best = std::numeric_limits<double>::quiet_NaN();
