@@ -718,6 +718,53 @@ TEST_CASE("pipeline: moderate one-half fireflies that the frame's decision suppo
     CHECK(detector_options{}.highlight.min_excess_z == 3.0);
 }
 
+TEST_CASE("pipeline: a firefly whose other half drew a rare sample of its own is rebuilt", "[pipeline]") {
+    // A horizontal ramp (0.2 to 4, relative sd 0.25 a half, so the standard deviations spread
+    // and a moderately noisy pixel is no outlier of the frame). At 16 pixels half B drew a
+    // rare sample (1.5x the level, relative variance 0.25: four times its neighbours') and half
+    // A a firefly on top (4x, relative variance 1). Judged in B's own variance, A's excess was
+    // z ~1.2 and it was kept (0 of 16 rebuilt); in the neighbourhood's noise at that level
+    // z ~4.7. B, no outlier, is kept.
+    constexpr int w = 48, h = 48;
+    const std::size_t n = static_cast<std::size_t>(w) * h;
+    auto level = [](int x) { return 0.2 * std::exp(3.0 * x / 47.0); };
+    auto firefly_at = [](int x, int y) { return (x == 20 || x == 28) && y % 6 == 3; };
+    std::vector<float> col[2], var[2];
+    for (int k = 0; k < 2; ++k) {
+        col[k].resize(n * 3);
+        var[k].resize(n * 3);
+        for (std::size_t i = 0; i < n; ++i) {
+            const int x = static_cast<int>(i % w), y = static_cast<int>(i / w);
+            const double l = level(x);
+            double v = quarter_noise_frame::noisy(l, k, x, y), rel_sd = 0.25;
+            if (firefly_at(x, y)) v = k ? 1.5 * l : 4.0 * l, rel_sd = k ? 0.5 : 1.0;
+            for (std::size_t c = 0; c < 3; ++c) {
+                col[k][i * 3 + c] = static_cast<float>(v);
+                var[k][i * 3 + c] = static_cast<float>(rel_sd * rel_sd * v * v);
+            }
+        }
+    }
+    half_buffer<float> hb[2];
+    for (int k = 0; k < 2; ++k) {
+        hb[k].color = *make_image_view(col[k].data(), w, h, 3);
+        hb[k].variance = *make_image_view(var[k].data(), w, h, 3);
+    }
+    std::vector<std::uint8_t> mask[2] = {std::vector<std::uint8_t>(n), std::vector<std::uint8_t>(n)};
+    detector d;
+    REQUIRE(d.process(hb[0], hb[1], *make_image_view(mask[0].data(), w, h, 1), *make_image_view(mask[1].data(), w, h, 1))
+                .error.ok());
+    int rebuilt = 0, other_half_rebuilt = 0, clean = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+        const bool ff = firefly_at(static_cast<int>(i % w), static_cast<int>(i / w));
+        if (ff) rebuilt += (mask[0][i] & mask_bits::firefly) != 0, other_half_rebuilt += (mask[1][i] & mask_bits::firefly) != 0;
+        else clean += (mask[0][i] & mask_bits::firefly) != 0;
+    }
+    INFO(rebuilt << " of 16 fireflies rebuilt, " << other_half_rebuilt << " of their other halves, " << clean << " clean pixels");
+    CHECK(rebuilt >= 14);
+    CHECK(other_half_rebuilt == 0);
+    CHECK(clean <= 3);  // 1 before: other halves that drew low, at the level 16 fireflies give the frame
+}
+
 TEST_CASE("pipeline: a fog frame with a bright beam and no fireflies is left alone", "[pipeline][calibration]") {
     const double alpha = 0.05;
     int frames = 0, touched = 0;
