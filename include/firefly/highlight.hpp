@@ -44,7 +44,9 @@
 // test flags in one half only agrees with the other half within the noise. With
 // min_excess_z > 0 such an outlier is reconstructed only when
 //     (L_out - L_other) / sqrt(2 var_other) > min_excess_z
-// (variances calibrated to variances of the mean, as below); 0 is the paper's behaviour.
+// (variances calibrated to variances of the mean, as below; the detector's var_other is the
+// other half's noise as its neighbourhood bounds it, pipeline.hpp noise_floor); 0 is the
+// paper's behaviour.
 // The frame's decision (fdr.hpp, Benjamini-Hochberg over every tested pixel-half) then keeps
 // only what the frame's p-values support, so this is a cap, not the test: 3 (a normal tail of
 // 1.3e-3) lets a frame dense with moderate fireflies reach them, where 4 had held the frame's
