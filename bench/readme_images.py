@@ -14,6 +14,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 import firefly
+from downstream import relmse  # the accuracy tables' relMSE
 from pfm_io import read_pfm
 
 RENDERS = {"cycles-caustics": (180, 270, 120, 250), "cycles-interior": None}  # 3x crop: y0, y1, x0, x1
@@ -30,10 +31,6 @@ def srgb8(rgb):
 def write_png(path, pixels):
     if not oiio.ImageBuf(np.ascontiguousarray(pixels)).write(path):
         sys.exit("cannot write " + path)
-
-
-def relmse(img, ref):
-    return float(np.mean((img - ref) ** 2 / (ref ** 2 + 0.01)))
 
 
 def main():

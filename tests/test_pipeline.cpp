@@ -614,41 +614,68 @@ TEST_CASE("pipeline: frames without fireflies are left alone in 1 - alpha of cas
 // than both halves there (detail), so the level is now the halves' geometric mean: kept. A
 // firefly on the same line, 60 over 10, is still rebuilt.
 namespace {
-// Two 48x48 RGB halves, half k's pixel (x, y) = value(k, x, y) with the variance of a relative
-// sd of 0.25, cleaned by a default detector: half A's colour before and after, and its mask.
-struct quarter_noise_frame {
-    static constexpr int w = 48, h = 48;
-    std::vector<float> col[2], var[2], before;
-    std::vector<std::uint8_t> mask;
-    template <class Value>
-    explicit quarter_noise_frame(Value&& value, const detector_options& options = {}) {
+// Two RGB halves of w x h, half k's channel c at (x, y) = pixel(k, x, y, c) = {value, sd of the
+// mean}, cleaned by a detector with the given options: both halves' colours after, half A's
+// before, and both masks.
+struct test_frame {
+    int w, h;
+    std::vector<float> col[2], before;
+    std::vector<std::uint8_t> mask[2];
+    template <class Pixel>
+    test_frame(int width, int height, Pixel&& pixel, const detector_options& options = {}) : w(width), h(height) {
         const std::size_t n = static_cast<std::size_t>(w) * h;
+        std::vector<float> var[2];
+        half_buffer<float> hb[2];
         for (int k = 0; k < 2; ++k) {
             col[k].resize(n * 3);
             var[k].resize(n * 3);
-            for (std::size_t i = 0; i < n; ++i) {
-                const float v = value(k, static_cast<int>(i % w), static_cast<int>(i / w));
-                for (std::size_t c = 0; c < 3; ++c) {
-                    col[k][i * 3 + c] = v;
-                    var[k][i * 3 + c] = 0.0625f * v * v;
+            for (std::size_t i = 0; i < n; ++i)
+                for (int c = 0; c < 3; ++c) {
+                    const std::pair<double, double> p = pixel(k, static_cast<int>(i % w), static_cast<int>(i / w), c);
+                    col[k][i * 3 + c] = static_cast<float>(p.first);
+                    var[k][i * 3 + c] = static_cast<float>(p.second * p.second);
                 }
-            }
-        }
-        before = col[0];
-        half_buffer<float> hb[2];
-        for (int k = 0; k < 2; ++k) {
             hb[k].color = *make_image_view(col[k].data(), w, h, 3);
             hb[k].variance = *make_image_view(var[k].data(), w, h, 3);
+            mask[k].assign(n, 0);
         }
-        mask.assign(n, 0);
+        before = col[0];
         detector d(options);
-        REQUIRE(d.process(hb[0], hb[1], *make_image_view(mask.data(), w, h, 1), image_view<std::uint8_t>{}).error.ok());
+        REQUIRE(d.process(hb[0], hb[1], *make_image_view(mask[0].data(), w, h, 1), *make_image_view(mask[1].data(), w, h, 1))
+                    .error.ok());
     }
-    static std::size_t at(int x, int y) { return static_cast<std::size_t>(y) * w + static_cast<std::size_t>(x); }
-    bool rebuilt(int x, int y) const { return (mask[at(x, y)] & mask_bits::firefly) != 0; }
+    std::size_t at(int x, int y) const { return static_cast<std::size_t>(y) * w + static_cast<std::size_t>(x); }
+    bool rebuilt(int x, int y) const { return (mask[0][at(x, y)] & mask_bits::firefly) != 0; }  // half A
+    // rebuilt pixels of half k where where(x, y) holds, and elsewhere in either half
+    template <class Where>
+    std::pair<int, int> count_rebuilt(int k, Where&& where) const {
+        std::pair<int, int> r{0, 0};
+        for (int y = 0; y < h; ++y)
+            for (int x = 0; x < w; ++x) {
+                const std::size_t i = at(x, y);
+                if (where(x, y)) r.first += (mask[k][i] & mask_bits::firefly) != 0;
+                else r.second += ((mask[0][i] | mask[1][i]) & mask_bits::firefly) != 0;
+            }
+        return r;
+    }
+};
+
+// 48x48, half k's pixel (x, y) = value(k, x, y) in every channel, relative sd 0.25.
+struct quarter_noise_frame : test_frame {
+    static constexpr int size = 48;
+    template <class Value>
+    explicit quarter_noise_frame(Value&& value, const detector_options& options = {})
+        : test_frame(
+              size, size,
+              [&](int k, int x, int y, int) {
+                  const double v = value(k, x, y);
+                  return std::pair<double, double>{v, 0.25 * v};
+              },
+              options) {}
     // a draw of relative sd 0.25 around mu, its own per pixel and half
     static float noisy(double mu, int k, int x, int y) {
-        sim::detail::counter_rng r(7, 0, at(x, y), static_cast<std::uint64_t>(k));
+        sim::detail::counter_rng r(7, 0, static_cast<std::uint64_t>(y) * size + static_cast<std::uint64_t>(x),
+                                   static_cast<std::uint64_t>(k));
         return static_cast<float>(mu * (1.0 + 0.25 * r.normal()));
     }
 };
@@ -708,8 +735,8 @@ TEST_CASE("pipeline: moderate one-half fireflies that the frame's decision suppo
     for (const double z : {3.0, 4.0}) {
         const quarter_noise_frame f = frame(z);
         int fireflies = 0, clean = 0;
-        for (int y = 0; y < quarter_noise_frame::h; ++y)
-            for (int x = 0; x < quarter_noise_frame::w; ++x)
+        for (int y = 0; y < f.h; ++y)
+            for (int x = 0; x < f.w; ++x)
                 (x % 6 == 3 && y % 6 == 3 ? fireflies : clean) += f.rebuilt(x, y);
         INFO("min_excess_z " << z << ": " << fireflies << " of 64 fireflies, " << clean << " clean pixels rebuilt");
         CHECK((z < 4 ? fireflies >= 40 : fireflies == 0));
@@ -719,46 +746,6 @@ TEST_CASE("pipeline: moderate one-half fireflies that the frame's decision suppo
 }
 
 namespace {
-// Two RGB halves of w x h, half k's channel c at (x, y) = pixel(k, x, y, c) = {value, sd of the
-// mean}, cleaned by a default detector; both halves' masks.
-struct signed_frame {
-    int w, h;
-    std::vector<std::uint8_t> mask[2];
-    template <class Pixel>
-    signed_frame(int width, int height, Pixel&& pixel) : w(width), h(height) {
-        const std::size_t n = static_cast<std::size_t>(w) * h;
-        std::vector<float> col[2], var[2];
-        half_buffer<float> hb[2];
-        for (int k = 0; k < 2; ++k) {
-            col[k].resize(n * 3);
-            var[k].resize(n * 3);
-            for (std::size_t i = 0; i < n; ++i)
-                for (int c = 0; c < 3; ++c) {
-                    const std::pair<double, double> p = pixel(k, static_cast<int>(i % w), static_cast<int>(i / w), c);
-                    col[k][i * 3 + c] = static_cast<float>(p.first);
-                    var[k][i * 3 + c] = static_cast<float>(p.second * p.second);
-                }
-            hb[k].color = *make_image_view(col[k].data(), w, h, 3);
-            hb[k].variance = *make_image_view(var[k].data(), w, h, 3);
-            mask[k].assign(n, 0);
-        }
-        detector d;
-        REQUIRE(d.process(hb[0], hb[1], *make_image_view(mask[0].data(), w, h, 1), *make_image_view(mask[1].data(), w, h, 1))
-                    .error.ok());
-    }
-    // rebuilt pixels of half k where at(x, y) holds, and elsewhere in either half
-    template <class At>
-    std::pair<int, int> rebuilt(int k, At&& at) const {
-        std::pair<int, int> r{0, 0};
-        for (int y = 0; y < h; ++y)
-            for (int x = 0; x < w; ++x) {
-                const std::size_t i = static_cast<std::size_t>(y) * w + x;
-                if (at(x, y)) r.first += (mask[k][i] & mask_bits::firefly) != 0;
-                else r.second += ((mask[0][i] | mask[1][i]) & mask_bits::firefly) != 0;
-            }
-        return r;
-    }
-};
 // a normal draw, its own per pixel, half and channel
 double draw(std::uint64_t seed, int k, int x, int y, int c) {
     sim::detail::counter_rng r(seed, static_cast<std::uint64_t>(c), static_cast<std::uint64_t>(y) * 4096 + x,
@@ -776,7 +763,7 @@ TEST_CASE("pipeline: a firefly whose other half drew a rare sample of its own is
     // less what B's rise explains, z ~4.7. B, no outlier, is kept.
     auto level = [](int x) { return 0.2 * std::exp(3.0 * x / 47.0); };
     auto firefly_at = [](int x, int y) { return (x == 20 || x == 28) && y % 6 == 3; };
-    const signed_frame f(48, 48, [&](int k, int x, int y, int) {
+    const test_frame f(48, 48, [&](int k, int x, int y, int) {
         const double l = level(x);
         if (!firefly_at(x, y)) {
             const double v = quarter_noise_frame::noisy(l, k, x, y);
@@ -785,8 +772,8 @@ TEST_CASE("pipeline: a firefly whose other half drew a rare sample of its own is
         if (k == 0) return std::pair<double, double>{4.0 * l, 4.0 * l};
         return std::pair<double, double>{1.5 * l, std::sqrt(0.375 * 0.375 + 0.5 * 0.5) * l};
     });
-    const auto [rebuilt, clean] = f.rebuilt(0, firefly_at);
-    const int other_half = f.rebuilt(1, firefly_at).first;
+    const auto [rebuilt, clean] = f.count_rebuilt(0, firefly_at);
+    const int other_half = f.count_rebuilt(1, firefly_at).first;
     INFO(rebuilt << " of 16 fireflies rebuilt, " << other_half << " of their other halves, " << clean << " clean pixels");
     CHECK(rebuilt >= 14);
     CHECK(other_half == 0);
@@ -795,30 +782,30 @@ TEST_CASE("pipeline: a firefly whose other half drew a rare sample of its own is
 
 TEST_CASE("pipeline: a single's other half keeps its own noise where its level does not explain it",
           "[pipeline][calibration]") {
-    // Review findings against the neighbourhood's prediction alone. (1) A converged region (the
-    // right half, relative sd 0.002) with a few genuinely noisy pixels (a silhouette, a glossy pixel):
+    // Where the neighbourhood's prediction alone failed. (1) A converged region (the right
+    // half, relative sd 0.002) with a few genuinely noisy pixels (a silhouette, a glossy pixel):
     // half B 1.0 with sd 0.25, half A 1.45 with sd 1 (an outlier of the frame by its sd; z 1.3
     // in B's noise). The neighbourhood predicts almost none and A "exceeded" B at z > 100;
     // B's variance is not explained by a rise (B is at the neighbourhood's level): kept. (2) A
     // dark region of signed values (a filter's negative lobes) where B's level is 0: the
     // prediction at level 0 is 0 (35 of 44 rebuilt at z = inf); kept.
     auto special = [](int x, int y) { return x >= 40 && x % 6 == 3 && y % 6 == 3; };
-    const signed_frame smooth(64, 64, [&](int k, int x, int y, int) {
+    const test_frame smooth(64, 64, [&](int k, int x, int y, int) {
         if (special(x, y)) return std::pair<double, double>{k ? 1.0 : 1.45, k ? 0.25 : 1.0};
         const double rel_sd = x >= 32 ? 0.002 : 0.25, v = 1.0 + rel_sd * draw(5, k, x, y, 0);  // grey
         return std::pair<double, double>{v, rel_sd * v};
     });
-    const auto [noisy_rebuilt, noisy_clean] = smooth.rebuilt(0, special);
+    const auto [noisy_rebuilt, noisy_clean] = smooth.count_rebuilt(0, special);
     INFO("smooth neighbourhood: " << noisy_rebuilt << " of 44 rebuilt, " << noisy_clean << " other pixels");
     CHECK(noisy_rebuilt == 0);
     CHECK(noisy_clean <= 11);  // 11 with the other half's own variance as before, 13 with the prediction alone
-    const signed_frame dark(64, 64, [&](int k, int x, int y, int c) {
+    const test_frame dark(64, 64, [&](int k, int x, int y, int c) {
         if (x < 32) return std::pair<double, double>{1.0 + 0.25 * draw(3, k, x, y, c), 0.25};
         if (!special(x, y)) return std::pair<double, double>{0.07 * draw(3, k, x, y, c), 0.07};
         const double b = c == 0 ? 0.1 : c == 1 ? -0.1 : 0.0;  // level 0
         return k ? std::pair<double, double>{b, 0.07} : std::pair<double, double>{b + 0.14, 1.0};
     });
-    const auto [zero_rebuilt, zero_clean] = dark.rebuilt(0, special);
+    const auto [zero_rebuilt, zero_clean] = dark.count_rebuilt(0, special);
     INFO("level 0: " << zero_rebuilt << " of 44 rebuilt, " << zero_clean << " other pixels");
     CHECK(zero_rebuilt == 0);
     CHECK(zero_clean <= 1);
