@@ -9,8 +9,10 @@
 //   agree        and the halves' mean radiance agrees within a factor (max/min <= max_ratio)
 //   confident    and the relative standard error of the pixel's mean over both halves,
 //                sqrt(var(A) + var(B)) / |A + B| (variances of the half means), is at most
-//                max_relative_error. A firefly is one sample carrying the pixel: one in each
-//                half gives at least 1/sqrt(2) = 0.71, and 1 when one dominates. A highlight
+//                max_relative_error; with the detector's base (pair_rise), over the pair's
+//                rise above its neighbourhood's level instead of |A + B|. A firefly is one
+//                sample carrying the pixel's excess: one in each half gives at least
+//                1/sqrt(2) = 0.71 of the rise, and 1 when one dominates. A highlight
 //                is many samples that agree: c / sqrt(2N) for N samples per half of relative
 //                spread c (0.22 for c = 2.5, N = 64). Both halves together halve the noise
 //                of the estimate compared with a test per half.
@@ -149,7 +151,7 @@ inline double pair_standard_error(double va, double vb, double calibration) noex
 }
 
 // A highlight spot around a pixel, from its neighbours that passed the strict limit: the mean
-// of their |A + B| and the largest of their standard errors, each as they were judged (a half
+// of their rises (pair_rise) and the largest of their standard errors, each as they were judged (a half
 // carrying a firefly replaced by the other). A pixel whose noise is the spot's (within the
 // cluster limit's allowance) is judged at the spot's level when that is higher than its own
 // (is_highlight).
@@ -158,12 +160,32 @@ struct highlight_spot {
     double se = 0.0;
 };
 
+// The share of the lower half's level a pair's base may take (pair_rise).
+inline constexpr double max_base_share = 1.0 / 3.0;
+
+// What the confident rule measures a pair's standard error against: its rise above its base,
+// |A + B| - 2 base, where base is the level the pixel's ordinary samples give (its smooth
+// neighbourhood's; 0: unknown, or detail). A firefly is one sample carrying a half's excess
+// over that base, so a pair of them has a standard error of at least 1/sqrt(2) of the rise
+// however bright the base; against |A + B| a moderate pair (each firefly 2-10 times the base,
+// as where fireflies are dense) looks as confident as a highlight (0.47-0.65 of the level).
+// The base counts only where both halves are positive and at most max_base_share of the lower
+// one: a pixel not well above its neighbourhood (a spot's centre among its own pixels, a
+// gradient) shares its law, and its rise stays at least two thirds of its level.
+inline double pair_rise(double la, double lb, double base) noexcept {
+    const double level = std::fabs(la + lb);
+    if (!(base > 0) || !(la > 0 && lb > 0)) return level;
+    return level - 2.0 * std::min(base, max_base_share * std::min(la, lb));
+}
+
 // Decide one pixel that is an outlier in both halves. la, lb: mean colour of the pixel in
 // each half; va, vb: its reduced variance in each half; calibration: variance_calibration::factor();
 // in_cluster: another both-half outlier is among its 8 neighbours; spot (cluster only): what
-// the strict highlights among them say of the spot (none: zeros).
+// the strict highlights among them say of the spot (none: zeros); base: the level its
+// ordinary samples give (pair_rise; 0: none).
 inline bool is_highlight(const highlight_options& o, double la, double lb, double va, double vb,
-                         double calibration, bool in_cluster = false, highlight_spot spot = {}) noexcept {
+                         double calibration, bool in_cluster = false, highlight_spot spot = {},
+                         double base = 0.0) noexcept {
     const bool want_agree =
         o.rule == highlight_rule::agree || o.rule == highlight_rule::confident_and_agree;
     const bool want_conf =
@@ -178,7 +200,8 @@ inline bool is_highlight(const highlight_options& o, double la, double lb, doubl
                                         : o.max_relative_error;
         const double se = pair_standard_error(va, vb, calibration);
         const bool spot_noise = se <= limit / o.max_relative_error * spot.se;  // (limit: cluster's)
-        const double level = spot_noise ? std::max(std::fabs(la + lb), spot.sum) : std::fabs(la + lb);
+        const double rise = pair_rise(la, lb, base);
+        const double level = spot_noise ? std::max(rise, spot.sum) : rise;
         if (!(se <= limit * level)) return false;
     }
     return true;
