@@ -1,4 +1,4 @@
-// Defects found by fuzzing and review, each pinned by a test that failed before its fix.
+// Defects of earlier versions, each pinned by a test that failed before its fix.
 #include <firefly/firefly.hpp>
 
 #include <cfloat>

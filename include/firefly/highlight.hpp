@@ -33,8 +33,8 @@
 // strict limit (a spot whose level is known; cluster pass only), a pixel whose standard error
 // is within the cluster limit's allowance (cluster / strict limit, 0.8 / 0.5) of the noisiest
 // of them has the spot's noise, and its error is taken relative to the larger of its own
-// |A + B| and their mean (highlight_spot): a spot's pixel that drew low in both halves has a
-// small sum and so a large error of its own (at 16 samples per half and c = 2.5, 36 of 285
+// rise (pair_rise: |A + B| where it has no base) and their mean (highlight_spot): a spot's
+// pixel that drew low in both halves has a small sum and so a large error of its own (at 16 samples per half and c = 2.5, 36 of 285
 // spot pixels failed at their own level, 2 at the spot's). Two fireflies that met beside a
 // spot carry their own noise, one sample each (a standard error near their sum), far above a
 // spot's many samples: judged at their own level as before. A spot without noise (a clamped
@@ -145,14 +145,14 @@ private:
 };
 
 // sqrt(vA + vB) with the variances calibrated to variances of the mean: the standard error
-// of A + B, which the confident rule compares with |A + B|.
+// of A + B, which the confident rule compares with the pair's rise (pair_rise).
 inline double pair_standard_error(double va, double vb, double calibration) noexcept {
     return std::sqrt((std::max(va, 0.0) + std::max(vb, 0.0)) * calibration);
 }
 
 // A highlight spot around a pixel, from its neighbours that passed the strict limit: the mean
-// of their rises (pair_rise) and the largest of their standard errors, each as they were judged (a half
-// carrying a firefly replaced by the other). A pixel whose noise is the spot's (within the
+// of their rises (pair_rise) and the largest of their standard errors, each as they were
+// judged (a half carrying a firefly replaced by the other). A pixel whose noise is the spot's (within the
 // cluster limit's allowance) is judged at the spot's level when that is higher than its own
 // (is_highlight).
 struct highlight_spot {
@@ -169,13 +169,15 @@ inline constexpr double max_base_share = 1.0 / 3.0;
 // over that base, so a pair of them has a standard error of at least 1/sqrt(2) of the rise
 // however bright the base; against |A + B| a moderate pair (each firefly 2-10 times the base,
 // as where fireflies are dense) looks as confident as a highlight (0.47-0.65 of the level).
-// The base counts only where both halves are positive and at most max_base_share of the lower
-// one: a pixel not well above its neighbourhood (a spot's centre among its own pixels, a
-// gradient) shares its law, and its rise stays at least two thirds of its level.
+// The caller says where a base is known (the detector: both halves more than three standard
+// deviations above a smooth neighbourhood; elsewhere 0). The base counts only where both
+// halves are positive, and at most max_base_share of the lower one: the rise stays at least
+// two thirds of the level, whatever the base. Non-finite levels or base: the level.
 inline double pair_rise(double la, double lb, double base) noexcept {
     const double level = std::fabs(la + lb);
     if (!(base > 0) || !(la > 0 && lb > 0)) return level;
-    return level - 2.0 * std::min(base, max_base_share * std::min(la, lb));
+    const double b = std::min(base, max_base_share * std::min(la, lb));
+    return std::isfinite(b) ? level - 2.0 * b : level;
 }
 
 // Decide one pixel that is an outlier in both halves. la, lb: mean colour of the pixel in
