@@ -201,8 +201,9 @@ TEST_CASE("moderate fireflies that met are judged by their rise above the neighb
     INFO("mask of a highlight pixel " << int(ma[hv.at(lit[0].first, lit[0].second)]));
     CHECK(rebuilt == 12);
     CHECK(kept == 12);
-    // the rise needs the pixel well above its neighbourhood: a noisy spot's own pixels, whose
-    // neighbourhood is the spot, are judged at their level (the cluster tests above)
+    // The detector gives a base only where both halves stand well above a smooth
+    // neighbourhood (a noisy spot's own pixels, whose neighbourhood is the spot, are judged at
+    // their level: the cluster tests above). pair_rise itself:
     CHECK(pair_rise(1.5, 1.5, 0.5) == Approx(2.0));
     CHECK(pair_rise(1.5, 1.5, 0.0) == 3.0);
     CHECK(pair_rise(1.5, 1.5, 10.0) == Approx(2.0));   // at most a third of the lower half

@@ -34,11 +34,12 @@
 // is within the cluster limit's allowance (cluster / strict limit, 0.8 / 0.5) of the noisiest
 // of them has the spot's noise, and its error is taken relative to the larger of its own
 // rise (pair_rise: |A + B| where it has no base) and their mean (highlight_spot): a spot's
-// pixel that drew low in both halves has a small sum and so a large error of its own (at 16 samples per half and c = 2.5, 36 of 285
-// spot pixels failed at their own level, 2 at the spot's). Two fireflies that met beside a
-// spot carry their own noise, one sample each (a standard error near their sum), far above a
-// spot's many samples: judged at their own level as before. A spot without noise (a clamped
-// emitter) or max_relative_error = 0 leaves every pixel at its own level, as before the rule.
+// pixel that drew low in both halves has a small sum and so a large error of its own (at 16
+// samples per half and c = 2.5, 36 of 285 spot pixels failed at their own level, 2 at the
+// spot's). Two fireflies that met beside a spot carry their own noise, one sample each (a
+// standard error near their sum), far above a spot's many samples: judged at their own level
+// as before. A spot without noise (a clamped emitter) or max_relative_error = 0 leaves every
+// pixel at its own level, as before the rule.
 //
 // An outlier in ONE half only is a firefly in the paper. It must also stand out against the
 // other half, though: a firefly makes its half exceed the other by many times the noise,
@@ -152,9 +153,9 @@ inline double pair_standard_error(double va, double vb, double calibration) noex
 
 // A highlight spot around a pixel, from its neighbours that passed the strict limit: the mean
 // of their rises (pair_rise) and the largest of their standard errors, each as they were
-// judged (a half carrying a firefly replaced by the other). A pixel whose noise is the spot's (within the
-// cluster limit's allowance) is judged at the spot's level when that is higher than its own
-// (is_highlight).
+// judged (a half carrying a firefly replaced by the other). A pixel whose noise is the spot's
+// (within the cluster limit's allowance) is judged at the spot's level when that is higher
+// than its own (is_highlight).
 struct highlight_spot {
     double sum = 0.0;
     double se = 0.0;
