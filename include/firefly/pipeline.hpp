@@ -616,8 +616,9 @@ private:
             const neighbourhood nb = neighbourhood_at(x, y, w, a.color.height(), pool, true);  // both halves'
             for (int h = 0; h < 2; ++h)
                 pair_log_p_[j * 2 + static_cast<std::size_t>(h)] = excess_log_p(hb, h, x, y, cal, nb, true);
-            pair_level_log_p_[j] = pair_level_log_p(a, b, x, y, nb);
-            pair_base_[j] = pair_base(a, b, x, y, nb);
+            const double la = mean_colour(a.color, x, y), lb = mean_colour(b.color, x, y);
+            pair_level_log_p_[j] = pair_level_log_p(la, lb, nb);
+            pair_base_[j] = pair_base(la, lb, nb);
         });
     }
 
@@ -625,11 +626,9 @@ private:
     // its neighbourhood's, where that is smooth and both halves stand more than three standard
     // deviations above it. Nearer, the pixel shares its neighbourhood's law (a spot's pixel
     // among its own, whose neighbourhood's level is the spot's) and is judged at its own level.
-    template <class C, class V, class A>
-    double pair_base(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b, int x, int y,
-                     const neighbourhood& nb) const {
-        const double lower = std::min(mean_colour(a.color, x, y), mean_colour(b.color, x, y));
-        return lower > nb.detail_above() ? nb.smooth_level() : 0.0;
+    // la, lb: the pair's mean colour in each half.
+    static double pair_base(double la, double lb, const neighbourhood& nb) {
+        return std::min(la, lb) > nb.detail_above() ? nb.smooth_level() : 0.0;
     }
 
     // Does the pair's level stand out from its neighbourhood (the p-value, log; -inf where the
@@ -652,10 +651,8 @@ private:
     // a relative variance of the mean within what non-negative samples give (at most 1 a
     // channel, 3 for one coloured sample carrying the pixel: above, the variance is not that of
     // the mean).
-    template <class C, class V, class A>
-    double pair_level_log_p(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b, int x, int y,
-                            const neighbourhood& nb) const {
-        const double level = 0.5 * (mean_colour(a.color, x, y) + mean_colour(b.color, x, y));
+    static double pair_level_log_p(double la, double lb, const neighbourhood& nb) {
+        const double level = 0.5 * (la + lb);
         if (!(nb.lower_noise > 0 && nb.lower_noise <= 3.0) || !(nb.around > 0) || !(level > 0) ||
             !std::isfinite(level))
             return -HUGE_VAL;
