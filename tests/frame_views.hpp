@@ -5,7 +5,9 @@
 #include <firefly/sim/scene.hpp>
 
 #include <cstddef>
+#include <cstdint>
 #include <utility>
+#include <vector>
 
 namespace firefly_test {
 
@@ -34,6 +36,24 @@ struct frame_views {
     }
     float col(int half, int x, int y, int c = 0) const { return f.color[half][at(x, y) * 3 + static_cast<std::size_t>(c)]; }
     float var(int half, int x, int y, int c = 0) const { return f.variance[half][at(x, y) * 3 + static_cast<std::size_t>(c)]; }
+
+    // Both halves cleaned (process) or checked (detect) by d, each half's mask written into
+    // mask[half] (frame-sized, zeroed first).
+    std::vector<std::uint8_t> mask[2];
+    template <class Detector>
+    firefly::frame_report process(Detector& d) {
+        return d.process(h[0], h[1], zeroed_mask(0), zeroed_mask(1));
+    }
+    template <class Detector>
+    firefly::frame_report detect(Detector& d) {
+        return d.detect(h[0], h[1], zeroed_mask(0), zeroed_mask(1));
+    }
+
+private:
+    firefly::image_view<std::uint8_t> zeroed_mask(int half) {
+        mask[half].assign(static_cast<std::size_t>(f.width) * static_cast<std::size_t>(f.height), 0);
+        return *firefly::make_image_view(mask[half].data(), f.width, f.height, 1);
+    }
 };
 
 }  // namespace firefly_test

@@ -121,10 +121,10 @@ TEST_CASE("spatial sources exclude every outlier: no firefly is rebuilt from a k
     // spatially in each half, from clean neighbours only.
     for (int half = 0; half < 2; ++half) v.set(half, 20, 20, 30.0f, 0.5f);
     for (int half = 0; half < 2; ++half) v.set(half, 22, 20, 600.0f, 360000.0f);
-    std::vector<std::uint8_t> ma(1600), mb(1600);
     detector d;
-    const frame_report r = d.process(v.h[0], v.h[1], *make_image_view(ma.data(), 40, 40), *make_image_view(mb.data(), 40, 40));
+    const frame_report r = v.process(d);
     REQUIRE(r.ok());
+    const auto& ma = v.mask[0];
     CHECK(ma[v.at(20, 20)] == mask_bits::highlight);
     CHECK((ma[v.at(22, 20)] & mask_bits::firefly) != 0);
     CHECK((ma[v.at(22, 20)] & mask_bits::other_half) == 0);  // bad in both halves: spatial

@@ -48,11 +48,10 @@ TEST_CASE("an outlier in both halves is kept, bit-identical; in one half it is r
     }
     const sim::frame orig = f;
     halves hv(f);
-    std::vector<std::uint8_t> ma(64 * 48), mb(64 * 48);
     detector d;
-    const frame_report r = d.process(hv.h[0], hv.h[1], *make_image_view(ma.data(), 64, 48),
-                                     *make_image_view(mb.data(), 64, 48));
+    const frame_report r = hv.process(d);
     REQUIRE(r.error.ok());
+    const auto &ma = hv.mask[0], &mb = hv.mask[1];
     const std::size_t fa = 10 * 64 + 10, fb = 20 * 64 + 30, hl = 40 * 64 + 50;
     CHECK(ma[fa] == (mask_bits::firefly | mask_bits::other_half));  // B is clean there
     CHECK(mb[fb] == (mask_bits::firefly | mask_bits::other_half));
@@ -157,13 +156,13 @@ TEST_CASE("a wide noisy highlight is kept whole as a cluster", "[pipeline][highl
         for (int y = 20; y < 36; ++y)
             for (int x = 20; x < 36; ++x)
                 for (int half = 0; half < 2; ++half) hv.set(half, x, y, 30.0f, 648.0f);
-        std::vector<std::uint8_t> ma(64 * 64), mb(64 * 64);
         detector_options o;
         o.local_test = local;
         o.return_energy = false;  // the 4 rebuilt corners' light would be given to the spot
         detector d(o);
-        const frame_report r = d.process(hv.h[0], hv.h[1], *make_image_view(ma.data(), 64, 64), *make_image_view(mb.data(), 64, 64));
+        const frame_report r = hv.process(d);
         REQUIRE(r.error.ok());
+        const auto &ma = hv.mask[0], &mb = hv.mask[1];
         std::size_t kept = 0;
         for (int y = 20; y < 36; ++y)
             for (int x = 20; x < 36; ++x)
@@ -191,10 +190,10 @@ TEST_CASE("moderate fireflies that met are judged by their rise above the neighb
         for (int half = 0; half < 2; ++half) hv.set(half, p.first, p.second, 1.5f, 1.0f);
     for (const auto& p : lit)
         for (int half = 0; half < 2; ++half) hv.set(half, p.first, p.second, 1.5f, 0.09f);
-    std::vector<std::uint8_t> ma(96 * 64), mb(96 * 64);
     detector d;
-    const frame_report r = d.process(hv.h[0], hv.h[1], *make_image_view(ma.data(), 96, 64), *make_image_view(mb.data(), 96, 64));
+    const frame_report r = hv.process(d);
     REQUIRE(r.error.ok());
+    const auto &ma = hv.mask[0], &mb = hv.mask[1];
     int rebuilt = 0, kept = 0;
     for (const auto& p : met) rebuilt += (ma[hv.at(p.first, p.second)] & mask_bits::firefly) && (mb[hv.at(p.first, p.second)] & mask_bits::firefly);
     for (const auto& p : lit) kept += (ma[hv.at(p.first, p.second)] & mask_bits::highlight) && (mb[hv.at(p.first, p.second)] & mask_bits::highlight);
@@ -223,14 +222,13 @@ TEST_CASE("a pair on a line of detail is judged against the line, not the backgr
         for (int half = 0; half < 2; ++half) hv.set(half, 30, y, 3.0f, 0.0506f);
     hv.set(0, 30, 24, 3.3f, 16.0f);
     hv.set(1, 30, 24, 3.6f, 16.0f);
-    std::vector<std::uint8_t> ma(64 * 48), mb(64 * 48);
     detector_options o;
     o.return_energy = false;
     detector d(o);
-    const frame_report r = d.process(hv.h[0], hv.h[1], *make_image_view(ma.data(), 64, 48), *make_image_view(mb.data(), 64, 48));
+    const frame_report r = hv.process(d);
     REQUIRE(r.error.ok());
-    CHECK(ma[hv.at(30, 24)] == mask_bits::consistent);
-    CHECK(mb[hv.at(30, 24)] == mask_bits::consistent);
+    CHECK(hv.mask[0][hv.at(30, 24)] == mask_bits::consistent);
+    CHECK(hv.mask[1][hv.at(30, 24)] == mask_bits::consistent);
     CHECK(hv.col(0, 30, 24) == 3.3f);
     CHECK(hv.col(1, 30, 24) == 3.6f);
 }
@@ -262,10 +260,10 @@ TEST_CASE("a pair within its neighbourhood's noise is kept; two fireflies that m
     const float fa = 20.0f * expected(40, 40), fb = 30.0f * expected(40, 40);
     hv.set(0, 40, 40, fa, fa * fa);
     hv.set(1, 40, 40, fb, fb * fb);
-    std::vector<std::uint8_t> ma(64 * 64), mb(64 * 64);
     detector d;
-    const frame_report r = d.detect(hv.h[0], hv.h[1], *make_image_view(ma.data(), 64, 64), *make_image_view(mb.data(), 64, 64));
+    const frame_report r = hv.detect(d);
     REQUIRE(r.error.ok());
+    const auto &ma = hv.mask[0], &mb = hv.mask[1];
     for (int k = 0; k < 9; ++k) {
         const std::size_t i = hv.at(50 + 5 * (k % 3), 12 + 20 * (k / 3));
         CHECK(ma[i] == mask_bits::consistent);
@@ -277,8 +275,7 @@ TEST_CASE("a pair within its neighbourhood's noise is kept; two fireflies that m
     // to the highlight rule alone, as before: two such fireflies that met are rebuilt
     hv.set(0, 40, 40, -fa, fa * fa);
     hv.set(1, 40, 40, -fb, fb * fb);
-    std::fill(ma.begin(), ma.end(), 0), std::fill(mb.begin(), mb.end(), 0);
-    REQUIRE(d.detect(hv.h[0], hv.h[1], *make_image_view(ma.data(), 64, 64), *make_image_view(mb.data(), 64, 64)).error.ok());
+    REQUIRE(hv.detect(d).error.ok());
     CHECK((ma[hv.at(40, 40)] & mask_bits::firefly) != 0);
     CHECK((mb[hv.at(40, 40)] & mask_bits::firefly) != 0);
 }
@@ -348,11 +345,10 @@ TEST_CASE("a firefly on top of a highlight is rebuilt in its half only", "[pipel
         f.variance[0][i * 3 + c] = 9.0f + 100.0f * 100.0f;
     }
     halves hv(f);
-    std::vector<std::uint8_t> ma(64 * 48), mb(64 * 48);
     detector d;
-    const frame_report r = d.process(hv.h[0], hv.h[1], *make_image_view(ma.data(), 64, 48),
-                                     *make_image_view(mb.data(), 64, 48));
+    const frame_report r = hv.process(d);
     REQUIRE(r.error.ok());
+    const auto &ma = hv.mask[0], &mb = hv.mask[1];
     // relative error sqrt(10018) / 180 = 0.56: a highlight as part of the spot; but A
     // exceeds B by 100 >> 4 sqrt(2 * 9): A's centre is a firefly on the highlight.
     CHECK(ma[i] == (mask_bits::firefly | mask_bits::other_half));  // from B's highlight value
