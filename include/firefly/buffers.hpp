@@ -82,7 +82,8 @@
 //   "NaN/Inf in a half are repaired"                   -> a buffer with NaN/Inf in colour or
 //       variance at a pixel is left out of the test and rebuilt like a firefly.
 //   "bad in both halves: spatial reconstruction"       -> a pixel with more than floor(K / 2)
-//       non-finite buffers is left as it is and counted (report.left, error no_valid_pixels).
+//       non-finite buffers is left as it is and counted (report.left, error no_valid_pixels);
+//       its masks stay 0, as its counts do (mask_bits::nonfinite marks a repaired buffer).
 //   K = 2 is the paper's method: the two buffers go to firefly::detector unchanged (variance
 //       required), with its global ESD, highlight check and spatial reconstruction.
 // Variance: that of each buffer's mean (accumulator.hpp gives it). Required for K = 2;
@@ -715,9 +716,9 @@ private:
             }
             gather(b, k, x, y, has_var, p);
             const int bad = k - p.usable;
-            if (bad > k / 2) {
+            if (bad > k / 2) {  // left as it is: no mask bit (nonfinite says "repaired")
                 rc.left += before ? 0 : 1;
-                write_masks(masks, p, x, y);
+                for (int i = 0; masks && i < k; ++i) masks[i](x, y) = 0;
                 continue;
             }
             const pooled pn = pooled_noise(x, y, w, h, k, with_var, own_rest(p, with_var));

@@ -11,6 +11,8 @@
 #include <firefly/firefly.hpp>
 #include <fuzzer/FuzzedDataProvider.h>
 
+#include "fuzz_values.hpp"
+
 #include <cfloat>
 #include <cmath>
 #include <cstdint>
@@ -24,38 +26,8 @@ using namespace firefly;
 
 namespace {
 
-[[noreturn]] void fail(const char* what) {
-    std::fprintf(stderr, "fuzz_detector: %s\n", what);
-    std::abort();
-}
-
-// A value: mostly plausible radiance (so that fireflies occur), sometimes a special value or
-// raw bits.
-template <class T>
-T value(FuzzedDataProvider& p, bool variance) {
-    const int kind = p.ConsumeIntegralInRange<int>(0, 15);
-    if (kind < 10) {
-        const double v = p.ConsumeIntegralInRange<int>(0, 1000) / 100.0;
-        return static_cast<T>(kind == 9 ? v * 1000 : variance ? v * v * 0.01 : v);
-    }
-    if (kind == 10) {
-        static const T special[] = {std::numeric_limits<T>::quiet_NaN(), std::numeric_limits<T>::infinity(),
-                                    -std::numeric_limits<T>::infinity(), T(-0.0), std::numeric_limits<T>::denorm_min(),
-                                    std::numeric_limits<T>::max(), -std::numeric_limits<T>::max(), T(FLT_MAX),
-                                    T(0), std::numeric_limits<T>::min(), T(-1)};
-        return special[p.ConsumeIntegralInRange<std::size_t>(0, sizeof special / sizeof special[0] - 1)];
-    }
-    if (sizeof(T) == 4 || kind == 11) {
-        const std::uint32_t bits = p.ConsumeIntegral<std::uint32_t>();
-        float f;
-        std::memcpy(&f, &bits, 4);
-        return static_cast<T>(f);
-    }
-    const std::uint64_t bits = p.ConsumeIntegral<std::uint64_t>();
-    T d;
-    std::memcpy(&d, &bits, sizeof d);
-    return d;
-}
+[[noreturn]] void fail(const char* what) { fuzz_values::fail("fuzz_detector", what); }
+using fuzz_values::value;
 
 // One image's placement inside a buffer: element offset and strides in elements.
 struct placement {
@@ -234,8 +206,5 @@ void run(FuzzedDataProvider& p) {
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-    FuzzedDataProvider p(data, size);
-    if (p.ConsumeBool()) run<float>(p);
-    else run<double>(p);
-    return 0;
+    return fuzz_values::float_or_double(data, size, [](FuzzedDataProvider& p, auto t) { run<decltype(t)>(p); });
 }
