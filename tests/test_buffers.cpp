@@ -232,10 +232,20 @@ TEST_CASE("K buffers: NaN in one buffer is repaired from the others", "[buffers]
 TEST_CASE("K buffers: more than half non-finite is left and reported", "[buffers]") {
     frame_k f = noisy_frame(4, 6, 6, 4);
     for (int b = 0; b < 3; ++b) f.color[static_cast<std::size_t>(b)][0] = std::numeric_limits<float>::quiet_NaN();
+    masks_k mk(4, 6, 6);
+    for (auto& m : mk.mem) m[0] = 0xff;  // written either way
     cross_buffer_detector d;
-    const cross_buffer_report r = d.process(f.views());
+    const cross_buffer_report r = d.process(f.views(), mk.views);
     CHECK(r.error.code() == errc::no_valid_pixels);
     CHECK(r.left == 1);
+    // Nothing was repaired there: the masks (mask_bits::nonfinite means "repaired") and the
+    // counts say so alike (the masks said nonfinite on the three NaN buffers, the counts 0).
+    CHECK(r.nonfinite == 0);
+    for (int b = 0; b < 4; ++b) {
+        CHECK(mk.mem[static_cast<std::size_t>(b)][0] == 0);
+        CHECK(r.per_buffer[static_cast<std::size_t>(b)] == 0);
+    }
+    CHECK(std::isnan(f.color[0][0]));
 }
 
 TEST_CASE("K buffers: inputs refused as status values", "[buffers]") {
@@ -492,6 +502,33 @@ TEST_CASE("K buffers: where fireflies are dense their energy comes back, and onl
                 moved += f.color[b][i] != without.color[b][i];
             }
     CHECK(moved == 0);
+}
+
+TEST_CASE("K buffers: a pixel left non-finite keeps its bits where energy returns", "[buffers][energy]") {
+    const int k = 4, w = 48, h = 48;
+    frame_k f = noisy_frame(k, w, h, 22);
+    std::uint32_t s = 777;
+    auto next = [&] { return s = s * 1664525u + 1013904223u; };
+    for (int y = 8; y < 40; ++y)  // dense fireflies all around: the return reaches (24, 24)
+        for (int x = 8; x < 40; ++x)
+            if (next() % 3 == 0) {
+                const std::size_t b = (next() >> 8) % k, i = static_cast<std::size_t>((y * w + x) * 3);
+                for (int c = 0; c < 3; ++c) f.color[b][i + static_cast<std::size_t>(c)] += 8.0f;
+            }
+    // (24, 24) non-finite in three of four buffers: left as it is, a signalling NaN among them
+    const std::size_t at = static_cast<std::size_t>((24 * w + 24) * 3);
+    const std::uint32_t snan_bits = 0x7f800001u;
+    float snan;
+    std::memcpy(&snan, &snan_bits, 4);
+    for (std::size_t b = 0; b < 3; ++b)
+        for (std::size_t c = 0; c < 3; ++c) f.color[b][at + c] = b == 0 ? snan : std::numeric_limits<float>::quiet_NaN();
+    const frame_k before = f;
+    cross_buffer_detector d;
+    const cross_buffer_report r = d.process(f.views(false));
+    CHECK(r.left == 1);
+    REQUIRE(r.energy_returned > 0);
+    for (std::size_t b = 0; b < static_cast<std::size_t>(k); ++b)
+        CHECK(std::memcmp(&f.color[b][at], &before.color[b][at], 3 * sizeof(float)) == 0);  // (the NaN was quieted)
 }
 
 TEST_CASE("K buffers: a flipped frame gives the flipped result, energy return included", "[buffers][energy]") {

@@ -1005,12 +1005,16 @@ struct energy_totals {
 
 // Adds add[0..2] to the first three channels of pixel (x, y), keeping the old values in
 // old[0..2]. False when a sum did not fit the image's own type (past FLT_MAX, or half's
-// 65504): the caller restores the pixel (restore_light).
+// 65504): the caller restores the pixel (restore_light). A pixel with a non-finite channel
+// to add to (one left as the input had it) is not written at all, and false: a float NaN
+// loaded as a double and stored back is quieted, other bits than the input's.
 template <class C>
 bool add_light(const image_view<C>& color, int x, int y, const double* add, double* old) {
+    for (int c = 0; c < 3; ++c) old[c] = color.load(x, y, c);
+    for (int c = 0; c < 3; ++c)
+        if (add[c] > 0 && !std::isfinite(old[c])) return false;
     bool finite = true;
     for (int c = 0; c < 3; ++c) {
-        old[c] = color.load(x, y, c);
         if (!(add[c] > 0)) continue;  // nothing to add: the bits stay as they are
         color.store(x, y, c, old[c] + add[c]);
         finite = finite && std::isfinite(color.load(x, y, c));
@@ -1018,10 +1022,11 @@ bool add_light(const image_view<C>& color, int x, int y, const double* add, doub
     return finite;
 }
 
+// Undoes add_light: the channels it wrote (finite before, so the round trip is exact).
 template <class C>
 void restore_light(const image_view<C>& color, int x, int y, const double* old, const double* add) {
     for (int c = 0; c < 3; ++c)
-        if (add[c] > 0) color.store(x, y, c, old[c]);
+        if (add[c] > 0 && std::isfinite(old[c])) color.store(x, y, c, old[c]);
 }
 
 namespace detail {
