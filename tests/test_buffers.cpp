@@ -441,6 +441,19 @@ double region_mean(const frame_k& f, int x0, int y0, int x1, int y1) {
             for (int x = x0; x < x1; ++x) s += c[static_cast<std::size_t>((y * f.w + x) * 3)];
     return s / (static_cast<double>(f.color.size()) * (x1 - x0) * (y1 - y0));
 }
+// Dense fireflies over the patch [x0, x1) x [y0, y1): one pixel in `one_in` (a fixed LCG from
+// seed) gets 8 added to every channel of one of its buffers.
+void add_dense_fireflies(frame_k& f, int x0, int y0, int x1, int y1, std::uint32_t one_in, std::uint32_t seed) {
+    const std::size_t k = f.color.size();
+    std::uint32_t s = seed;
+    auto next = [&] { return s = s * 1664525u + 1013904223u; };
+    for (int y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x)
+            if (next() % one_in == 0) {
+                const std::size_t b = (next() >> 8) % k, i = static_cast<std::size_t>((y * f.w + x) * 3);
+                for (int c = 0; c < 3; ++c) f.color[b][i + static_cast<std::size_t>(c)] += 8.0f;
+            }
+}
 }  // namespace
 
 TEST_CASE("K buffers: a lone firefly's energy is not spread", "[buffers][energy]") {
@@ -464,14 +477,7 @@ TEST_CASE("K buffers: a lone firefly's energy is not spread", "[buffers][energy]
 TEST_CASE("K buffers: where fireflies are dense their energy comes back, and only there", "[buffers][energy]") {
     const int w = 96, h = 64, k = 8;
     frame_k f = noisy_frame(k, w, h, 21);
-    std::uint32_t s = 12345;
-    auto next = [&] { return s = s * 1664525u + 1013904223u; };
-    for (int y = 16; y < 48; ++y)  // a 32 x 32 patch: one pixel in 4 gets a firefly in one buffer
-        for (int x = 8; x < 40; ++x)
-            if (next() % 4 == 0) {
-                const std::size_t b = (next() >> 8) % k, i = static_cast<std::size_t>((y * w + x) * 3);
-                for (int c = 0; c < 3; ++c) f.color[b][i + static_cast<std::size_t>(c)] += 8.0f;  // a share of half the light
-            }
+    add_dense_fireflies(f, 8, 16, 40, 48, 4, 12345);  // a 32 x 32 patch: a share of half the light
     const frame_k before = f;
     frame_k without = f;
     cross_buffer_options off;
@@ -507,14 +513,7 @@ TEST_CASE("K buffers: where fireflies are dense their energy comes back, and onl
 TEST_CASE("K buffers: a pixel left non-finite keeps its bits where energy returns", "[buffers][energy]") {
     const int k = 4, w = 48, h = 48;
     frame_k f = noisy_frame(k, w, h, 22);
-    std::uint32_t s = 777;
-    auto next = [&] { return s = s * 1664525u + 1013904223u; };
-    for (int y = 8; y < 40; ++y)  // dense fireflies all around: the return reaches (24, 24)
-        for (int x = 8; x < 40; ++x)
-            if (next() % 3 == 0) {
-                const std::size_t b = (next() >> 8) % k, i = static_cast<std::size_t>((y * w + x) * 3);
-                for (int c = 0; c < 3; ++c) f.color[b][i + static_cast<std::size_t>(c)] += 8.0f;
-            }
+    add_dense_fireflies(f, 8, 8, 40, 40, 3, 777);  // all around: the return reaches (24, 24)
     // (24, 24) non-finite in three of four buffers: left as it is, a signalling NaN among them
     const std::size_t at = static_cast<std::size_t>((24 * w + 24) * 3);
     const std::uint32_t snan_bits = 0x7f800001u;

@@ -60,6 +60,18 @@ struct frame_shape {
     int k, w, h, nc, nv;
 };
 
+// One frame-sized mask per buffer, zeroed, and the views the detector writes them through.
+struct frame_masks {
+    std::vector<std::vector<std::uint8_t>> mem;
+    std::vector<image_view<std::uint8_t>> views;
+    explicit frame_masks(const frame_shape& f)
+        : mem(static_cast<std::size_t>(f.k), std::vector<std::uint8_t>(static_cast<std::size_t>(f.w * f.h), 0)) {
+        for (auto& m : mem) views.push_back(*make_image_view(m.data(), f.w, f.h));
+    }
+    frame_masks(const frame_masks&) = delete;  // the views point into mem
+    frame_masks& operator=(const frame_masks&) = delete;
+};
+
 template <class T>
 bool same_bits(const T& a, const T& b) {
     return std::memcmp(&a, &b, sizeof(T)) == 0;
@@ -173,10 +185,8 @@ void run(FuzzedDataProvider& p) {
         if (f.nv) views[static_cast<std::size_t>(i)].variance = view_of(s[1][static_cast<std::size_t>(i)], w, h);
     }
     const std::vector<image_storage<T>> before[2] = {s[0], s[1]};
-    std::vector<std::vector<std::uint8_t>> mask(static_cast<std::size_t>(k),
-                                                std::vector<std::uint8_t>(static_cast<std::size_t>(w * h), 0));
-    std::vector<image_view<std::uint8_t>> mv;
-    for (auto& m : mask) mv.push_back(*make_image_view(m.data(), w, h));
+    frame_masks pm(f), dm(f);  // process()'s and detect()'s
+    const auto &mask = pm.mem, &dmask = dm.mem;
 
     // Detection first, on const views of the input: it must change nothing, and process()
     // must report the same pixels.
@@ -185,13 +195,10 @@ void run(FuzzedDataProvider& p) {
     static cross_buffer_detector serial, threaded(cross_buffer_options{}, executor::threads(2));
     cross_buffer_detector& d = p.ConsumeBool() ? threaded : serial;
     d.set_options(o);
-    std::vector<std::vector<std::uint8_t>> dmask = mask;
-    std::vector<image_view<std::uint8_t>> dmv;
-    for (auto& m : dmask) dmv.push_back(*make_image_view(m.data(), w, h));
-    const cross_buffer_report dr = d.detect(cviews, dmv);
+    const cross_buffer_report dr = d.detect(cviews, dm.views);
     if (!unchanged(s, before)) fail("detect() changed a buffer");
 
-    const cross_buffer_report r = d.process(views, mv);
+    const cross_buffer_report r = d.process(views, pm.views);
     check_frame(f, s, before, mask, r, finite);
     // (process() alone may add that pixels were left, and at K = 2 the bits of what it did:
     // energy added, rebuilt from the other half)
