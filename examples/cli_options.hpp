@@ -210,8 +210,8 @@ inline void add_io_options(CLI::App& app, options& c, raw_args& r) {
                    "also write the cleaned buffers: PREFIX_a.exr and PREFIX_b.exr (two halves), PREFIX_0.exr ... "
                    "(--buffers, --renders)")->type_name("PREFIX")->group("outputs");
     app.add_option("--masks", c.masks,
-                   "also write masks, named as --halves: channels firefly, highlight, consistent, nonfinite (0 or 1) "
-                   "for two buffers; firefly, nonfinite for 3 or more")->type_name("PREFIX")
+                   "also write masks, named as --halves: channels firefly, highlight, consistent, nonfinite, energy "
+                   "(0 or 1) for two buffers; firefly, nonfinite for 3 or more")->type_name("PREFIX")
         ->group("outputs");
     app.add_option("--report", c.report,
                    "JSON report: options, per-frame counts (buffers, pixels, tested, fireflies, nonfinite, left, "

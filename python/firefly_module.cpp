@@ -381,6 +381,7 @@ PYBIND11_MODULE(firefly, m) {
     m.attr("MASK_CONSISTENT") = firefly::mask_bits::consistent;
     m.attr("MASK_OTHER_HALF") = firefly::mask_bits::other_half;
     m.attr("MASK_ENERGY") = firefly::mask_bits::energy;
+    m.attr("MASK_LEFT") = firefly::mask_bits::left;
     bind_reports(m);
     bind_detector(m);
 }

@@ -238,13 +238,17 @@ TEST_CASE("K buffers: more than half non-finite is left and reported", "[buffers
     const cross_buffer_report r = d.process(f.views(), mk.views);
     CHECK(r.error.code() == errc::no_valid_pixels);
     CHECK(r.left == 1);
-    // Nothing was repaired there: the masks (mask_bits::nonfinite means "repaired") and the
-    // counts say so alike (the masks said nonfinite on the three NaN buffers, the counts 0).
+    // Nothing was repaired there: the counts say 0, the masks say where NaN was found and left
+    // (nonfinite | left on the three NaN buffers; once nonfinite alone, which reads
+    // "repaired", then 0, which hid where NaN remains).
     CHECK(r.nonfinite == 0);
     for (int b = 0; b < 4; ++b) {
-        CHECK(mk.mem[static_cast<std::size_t>(b)][0] == 0);
+        const std::uint8_t want = b < 3 ? std::uint8_t{mask_bits::nonfinite | mask_bits::left} : std::uint8_t{0};
+        CHECK(int(mk.mem[static_cast<std::size_t>(b)][0]) == int(want));
         CHECK(r.per_buffer[static_cast<std::size_t>(b)] == 0);
     }
+    for (std::size_t i = 1; i < 36; ++i)
+        for (int b = 0; b < 4; ++b) CHECK((mk.mem[static_cast<std::size_t>(b)][i] & mask_bits::left) == 0);
     CHECK(std::isnan(f.color[0][0]));
 }
 

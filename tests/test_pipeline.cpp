@@ -494,12 +494,27 @@ TEST_CASE("constant, 1x1, all-black and all-NaN frames", "[pipeline][hard]") {
     std::vector<float> nan(30, std::numeric_limits<float>::quiet_NaN()), nv = nan, nan2 = nan, nv2 = nan;
     half_buffer<float> na{*make_image_view(nan.data(), 5, 2, 3), *make_image_view(nv.data(), 5, 2, 3), {}};
     half_buffer<float> nb{*make_image_view(nan2.data(), 5, 2, 3), *make_image_view(nv2.data(), 5, 2, 3), {}};
-    r = d.process(na, nb);
+    std::vector<std::uint8_t> ma(10, 0), mb(10, 0);
+    r = d.process(na, nb, *make_image_view(ma.data(), 5, 2, 1), *make_image_view(mb.data(), 5, 2, 1));
     CHECK(r.error.code() == errc::no_valid_pixels);  // the frame could not be cleaned: it says so
     CHECK(r.half[0].reconstruction.code() == errc::no_valid_pixels);
     CHECK(r.half[0].unreachable == 10);
     CHECK(r.half[0].repaired == 0);
     for (float x : nan) CHECK(std::isnan(x));  // left as they were, not silently 0
+    for (std::size_t i = 0; i < 10; ++i) {     // and the masks say where (nonfinite alone: "repaired")
+        CHECK(int(ma[i]) == int(mask_bits::nonfinite | mask_bits::left));
+        CHECK(int(mb[i]) == int(mask_bits::nonfinite | mask_bits::left));
+    }
+    // the same detector on a frame that can be cleaned: no pixel left, no left bit
+    std::vector<float> c1(30, 0.5f), v1(30, 0.01f), c2 = c1, v2 = v1;
+    c1[3 * 3] = std::numeric_limits<float>::quiet_NaN();
+    half_buffer<float> ha{*make_image_view(c1.data(), 5, 2, 3), *make_image_view(v1.data(), 5, 2, 3), {}};
+    half_buffer<float> hb2{*make_image_view(c2.data(), 5, 2, 3), *make_image_view(v2.data(), 5, 2, 3), {}};
+    r = d.process(ha, hb2, *make_image_view(ma.data(), 5, 2, 1), *make_image_view(mb.data(), 5, 2, 1));
+    CHECK(r.error.ok());
+    CHECK(r.half[0].repaired == 1);
+    for (std::size_t i = 0; i < 10; ++i) CHECK((ma[i] & mask_bits::left) == 0);
+    CHECK((ma[3] & mask_bits::nonfinite) != 0);
     // 1e30 fireflies next to 1e-3 pixels, and FLT_MAX
     sim::frame f = flat(50, 40, 8);
     for (auto& x : f.color[0]) x *= 0.002f;

@@ -83,7 +83,7 @@
 //       variance at a pixel is left out of the test and rebuilt like a firefly.
 //   "bad in both halves: spatial reconstruction"       -> a pixel with more than floor(K / 2)
 //       non-finite buffers is left as it is and counted (report.left, error no_valid_pixels);
-//       its masks stay 0, as its counts do (mask_bits::nonfinite marks a repaired buffer).
+//       its non-finite buffers' masks say nonfinite | left (found, not repaired), the others 0.
 //   K = 2 is the paper's method: the two buffers go to firefly::detector unchanged (variance
 //       required), with its global ESD, highlight check and spatial reconstruction.
 // Variance: that of each buffer's mean (accumulator.hpp gives it). Required for K = 2;
@@ -716,9 +716,9 @@ private:
             }
             gather(b, k, x, y, has_var, p);
             const int bad = k - p.usable;
-            if (bad > k / 2) {  // left as it is: no mask bit (nonfinite says "repaired")
+            if (bad > k / 2) {  // left as it is: its non-finite buffers say so
                 rc.left += before ? 0 : 1;
-                for (int i = 0; masks && i < k; ++i) masks[i](x, y) = 0;
+                write_left_masks(masks, p, x, y);
                 continue;
             }
             const pooled pn = pooled_noise(x, y, w, h, k, with_var, own_rest(p, with_var));
@@ -784,6 +784,13 @@ private:
             write_masks(masks, p, x, y);
             if (clean && (flags > 0 || bad > 0)) rebuild(b, p, x, y, has_var, excess_.empty() ? nullptr : &excess_[index(x, y, w) * 3]);
         }
+    }
+
+    // A pixel left as it is (more than K / 2 non-finite buffers): nonfinite | left on those.
+    static void write_left_masks(const image_view<std::uint8_t>* masks, const detail::pixel_buffers& p, int x, int y) {
+        constexpr std::uint8_t found_left = mask_bits::nonfinite | mask_bits::left;
+        for (int i = 0; masks && i < p.k; ++i)
+            masks[i](x, y) = p.finite[static_cast<std::size_t>(i)] ? std::uint8_t{0} : found_left;
     }
 
     static void write_masks(const image_view<std::uint8_t>* masks, const detail::pixel_buffers& p, int x, int y) {

@@ -117,9 +117,9 @@ inline status check_options(const detector_options& o) noexcept {
 
 // Bits of the optional per-pixel masks.
 namespace mask_bits {
-inline constexpr std::uint8_t firefly = 1;    // outlier rebuilt
+inline constexpr std::uint8_t firefly = 1;    // outlier rebuilt (unless left)
 inline constexpr std::uint8_t highlight = 2;  // outlier in both halves, kept
-inline constexpr std::uint8_t nonfinite = 4;  // NaN/Inf repaired
+inline constexpr std::uint8_t nonfinite = 4;  // NaN/Inf repaired (unless left)
 inline constexpr std::uint8_t consistent = 8; // outlier in one half, but within the noise of
                                               // the other half: kept (min_excess_z); or in
                                               // both, within its neighbourhood's noise
@@ -128,6 +128,10 @@ inline constexpr std::uint8_t other_half = 16;// rebuilt from the other half's v
                                               // are correlated here
 inline constexpr std::uint8_t energy = 32;    // light added by the energy return (energy.hpp):
                                               // the removed fireflies' energy given back
+inline constexpr std::uint8_t left = 64;      // with firefly or nonfinite: to be rebuilt, but
+                                              // no usable value reached it (process() only;
+                                              // report.unreachable, no_valid_pixels; K buffers:
+                                              // report.left): it keeps its input values
 }  // namespace mask_bits
 
 struct half_report {
@@ -221,7 +225,7 @@ public:
                  h.hist.bytes() + h.select_f.capacity() * sizeof(float) +
                  h.select.capacity() * sizeof(double) + h.order.capacity() * sizeof(std::uint32_t) +
                  h.removed.capacity() * sizeof(double) + (h.keys.capacity() + h.keys_tmp.capacity()) * sizeof(std::uint64_t) +
-                 (h.fix.capacity() + h.cross.capacity()) * sizeof(std::uint32_t) +
+                 (h.fix.capacity() + h.cross.capacity() + h.left.capacity()) * sizeof(std::uint32_t) +
                  h.cross_values.capacity() * sizeof(double) + h.decision.capacity() +
                  h.band_counts.capacity() * sizeof(stddev_counts) + h.before.capacity() * sizeof(float) + h.added.capacity() +
                  h.recon.bytes();
@@ -278,6 +282,7 @@ private:
         std::vector<stddev_counts> band_counts;  // the standard-deviation pass per row band
         std::vector<float> before;           // return_energy: colour of the pixels to rebuild
         std::vector<std::uint8_t> added;     // return_energy with a mask: light added here
+        std::vector<std::uint32_t> left;     // pixels to rebuild that nothing reached (this frame)
         reconstruct_scratch recon;
     };
 
@@ -1103,6 +1108,7 @@ private:
     template <class C, class V, class A>
     void finish(const half_buffer<C, V, A>& hb, half_state& s, const image_view<std::uint8_t>& mask, half_report& r,
                 bool clean, bool cross) {
+        s.left.clear();
         if constexpr (!std::is_const_v<C> && !std::is_const_v<V>) {
             if (clean) rebuild(hb, s, r, cross);
         } else {
@@ -1146,8 +1152,11 @@ private:
         r.reconstruction = rr.error;
         r.unreachable = rr.unreachable;
         std::size_t repaired = 0;
-        for (const std::uint32_t p : s.fix)  // unreachable pixels are still marked pending
-            repaired += cls(label[p]) == nonfinite_class && !((label[p] & fix_bit) && s.recon.state_[p] == 1);
+        for (const std::uint32_t p : s.fix) {  // unreachable pixels are still marked pending
+            const bool left = (label[p] & fix_bit) && s.recon.state_[p] == 1;
+            repaired += cls(label[p]) == nonfinite_class && !left;
+            if (left) s.left.push_back(p);
+        }
         r.repaired = repaired;
     }
 
@@ -1164,6 +1173,11 @@ private:
                 if (l & other_half_bit) m |= mask_bits::other_half;
                 mask(x, y) = m;
             }
+        for (const std::uint32_t p : s.left) {  // process() only: detect() rebuilds nothing
+            const int x = static_cast<int>(p % static_cast<std::uint32_t>(w));
+            const int y = static_cast<int>(p / static_cast<std::uint32_t>(w));
+            mask(x, y) = static_cast<std::uint8_t>(mask(x, y) | mask_bits::left);
+        }
     }
 
     detector_options options_;

@@ -76,10 +76,10 @@ def test_masks(processed):
     assert np.count_nonzero(b & firefly.MASK_HIGHLIGHT) == rep.half[1].highlights
     assert np.count_nonzero(a & firefly.MASK_CONSISTENT) == rep.half[0].consistent
     assert np.count_nonzero(a & firefly.MASK_OTHER_HALF) == rep.half[0].from_other_half
-    assert np.all(a < 64) and np.all(b < 64)  # every pixel written (they started at 255)
+    assert np.all(a < 64) and np.all(b < 64)  # every pixel written (they started at 255), none left
     bits = [firefly.MASK_FIREFLY, firefly.MASK_HIGHLIGHT, firefly.MASK_NONFINITE, firefly.MASK_CONSISTENT,
-            firefly.MASK_OTHER_HALF, firefly.MASK_ENERGY]
-    assert bits == [1, 2, 4, 8, 16, 32]
+            firefly.MASK_OTHER_HALF, firefly.MASK_ENERGY, firefly.MASK_LEFT]
+    assert bits == [1, 2, 4, 8, 16, 32, 64]
 
 
 def test_options_round_trip():
@@ -159,8 +159,12 @@ def test_a_frame_with_nothing_to_rebuild_from_returns_a_report():
     arrays = arrays_of(frame)
     for k in ("a_color", "b_color"):
         arrays[k][:] = np.nan
-    rep = firefly.Detector().process(**arrays)
+    masks = [np.zeros((16, 16), np.uint8) for _ in range(2)]
+    rep = firefly.Detector().process(**arrays, a_mask=masks[0], b_mask=masks[1])
     assert not rep.ok
     assert rep.error.code == "no_valid_pixels" and rep.error.message
     assert rep.half[0].nonfinite == 16 * 16
+    for m in masks:  # found and left as it was: the masks say where NaN remains
+        assert np.all(m == firefly.MASK_NONFINITE | firefly.MASK_LEFT)
+    assert np.all(np.isnan(arrays["a_color"]))
     assert rep.as_dict()["error"]["ok"] is False

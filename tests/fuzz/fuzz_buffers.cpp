@@ -5,11 +5,12 @@
 // raw bit patterns among them (NaN, Inf, -0, denormals, FLT_MAX); random options.
 //
 // Asserts: no crash; a frame the detector refuses is left as it was, masks included; otherwise
-// a pixel-buffer whose mask has neither the firefly nor the nonfinite bit keeps its variance
+// a pixel-buffer whose mask has neither the firefly nor the nonfinite bit (or has left) keeps its variance
 // and any fourth colour channel bit for bit, and its first three colour channels either stay
 // or grow to a finite value (the energy return only adds light); a pixel-buffer whose input
 // colour was finite never comes out NaN, nor does any when the whole input was finite; the
-// report counts what the masks mark; detect() on a copy reports the same and changes nothing.
+// report counts what the masks mark (left: report.left, or K = 2's unreachable); detect() on a
+// copy reports the same and changes nothing.
 #include <firefly/buffers.hpp>
 #include <fuzzer/FuzzedDataProvider.h>
 
@@ -84,7 +85,7 @@ void check_pixel(const frame_shape& f, const image_storage<T>& col, const image_
                  const image_storage<T>& var, const image_storage<T>& var0, int x, int y, std::uint8_t m,
                  bool finite) {
     const int sy = col.flip ? f.h - 1 - y : y, vy = var.flip ? f.h - 1 - y : y;
-    const bool marked = (m & (mask_bits::firefly | mask_bits::nonfinite)) != 0;
+    const bool marked = (m & (mask_bits::firefly | mask_bits::nonfinite)) != 0 && !(m & mask_bits::left);
     bool pixel_finite = true;
     for (int c = 0; c < f.nc; ++c) pixel_finite = pixel_finite && std::isfinite(static_cast<double>(col0.at(x, sy, c)));
     for (int c = 0; c < f.nc; ++c) {
@@ -127,15 +128,27 @@ void check_frame(const frame_shape& f, const std::vector<image_storage<T>> (&s)[
         }
         return;
     }
-    std::size_t marked = 0;
+    // K = 2 counts what the pair detector found (left pixels too: its halves' unreachable);
+    // K >= 3 what it rebuilt (left pixels: report.left)
+    std::size_t marked = 0, left_pixels = 0;
+    for (int y = 0; y < f.h; ++y)
+        for (int x = 0; x < f.w; ++x) {
+            bool left = false;
+            for (int i = 0; i < f.k; ++i) left = left || (mask[static_cast<std::size_t>(i)][static_cast<std::size_t>(y * f.w + x)] & mask_bits::left);
+            left_pixels += left;
+        }
     for (int i = 0; i < f.k; ++i) {
-        std::size_t in_buffer = 0;
+        std::size_t in_buffer = 0, left_here = 0;
         for (int y = 0; y < f.h; ++y)
             for (int x = 0; x < f.w; ++x) {
                 const std::uint8_t m = mask[static_cast<std::size_t>(i)][static_cast<std::size_t>(y * f.w + x)];
-                in_buffer += (m & (mask_bits::firefly | mask_bits::nonfinite)) != 0;
+                const bool found = (m & (mask_bits::firefly | mask_bits::nonfinite)) != 0;
+                if ((m & mask_bits::left) && !found) fail("a left mask without what was found");
+                left_here += (m & mask_bits::left) != 0;
+                in_buffer += found && (f.k == 2 || !(m & mask_bits::left));
                 check_pixel(f, s[0][i], before[0][i], s[1][i], before[1][i], x, y, m, finite);
             }
+        if (f.k == 2 && left_here != r.pair.half[i].unreachable) fail("left masks differ from unreachable");
         if (r.per_buffer.size() != static_cast<std::size_t>(f.k) || r.per_buffer[static_cast<std::size_t>(i)] != in_buffer) {
             std::fprintf(stderr, "K %d buffer %d of %dx%d: per_buffer %zu, masks %zu; %s\n", f.k, i, f.w, f.h,
                          r.per_buffer.size() == static_cast<std::size_t>(f.k) ? r.per_buffer[static_cast<std::size_t>(i)] : 0,
@@ -145,6 +158,7 @@ void check_frame(const frame_shape& f, const std::vector<image_storage<T>> (&s)[
         marked += in_buffer;
     }
     if (r.fireflies + r.nonfinite != marked) fail("fireflies + nonfinite differ from the masks");
+    if (f.k > 2 && left_pixels != r.left) fail("left masks differ from report.left");
 }
 
 template <class T>

@@ -3,8 +3,8 @@
 // in one buffer, planar, separate buffers with padded and flipped strides), float and double,
 // with raw bit patterns among the values (NaN, Inf, -0, denormals, FLT_MAX).
 //
-// Asserts: no crash; pixels whose mask has neither the firefly nor the nonfinite bit are
-// bit-identical to the input (colour, variance, alpha), except that the energy bit lets the
+// Asserts: no crash; pixels whose mask has neither the firefly nor the nonfinite bit, or has
+// the left bit, are bit-identical to the input (colour, variance, alpha), except that the energy bit lets the
 // first three colour channels grow (the energy return only adds light); alpha is never
 // written; a frame whose inputs are all finite gives no NaN, and no pixel whose input colour
 // was finite comes out NaN.
@@ -110,7 +110,10 @@ void check_frame(const frame_shape& f, const int (&nch)[3], half_storage<T> (&s)
                 const int sy = flip[i] ? f.h - 1 - y : y;
                 const std::uint8_t m = mask[i][static_cast<std::size_t>(y * f.w + x)];
                 // A refused frame writes no mask, so it may change nothing.
-                const bool may_change = (m & (mask_bits::firefly | mask_bits::nonfinite)) != 0;
+                // A left pixel (no usable value reached it) keeps its input.
+                const bool may_change = (m & (mask_bits::firefly | mask_bits::nonfinite)) != 0 && !(m & mask_bits::left);
+                if ((m & mask_bits::left) && !(m & (mask_bits::firefly | mask_bits::nonfinite)))
+                    fail("a left mask without what was found");
                 const bool may_grow = (m & mask_bits::energy) != 0;  // colour channels 0..2
                 if (may_grow && f.alpha && !(static_cast<double>(*element(before[i], 2, x, sy, 0)) > 0))
                     fail("light added to a pixel with alpha <= 0");
