@@ -1,4 +1,4 @@
-// firefly Python module: numpy half buffers cleaned in place, with no copy.
+// firefly Python module: numpy half buffers (or K buffers) cleaned in place, with no copy.
 //
 // Arrays are wrapped in image_views with numpy's own byte strides (any layout numpy can
 // describe, e.g. px[..., :3] and px[..., 3:6] of one (H, W, 6) array). The library returns
@@ -14,12 +14,15 @@
 #include <mutex>
 #include <string>
 #include <type_traits>
+#include <vector>
 
 #include <firefly/version.hpp>
 
 #include "firefly_tables.hpp"
 
 namespace py = pybind11;
+using firefly::cross_buffer_options;
+using firefly::cross_buffer_report;
 using firefly::detector_options;
 using firefly::frame_report;
 using firefly::half_report;
@@ -79,29 +82,65 @@ py::object option_to_python(const T& v) {
     }
 }
 
-detector_options options_from_kwargs(const py::kwargs& kw) {
-    detector_options o;
+// The keywords of kw that `list` names, into o; how many there were.
+template <class O, class List>
+std::size_t read_options(const py::kwargs& kw, O& o, List&& list) {
     std::size_t used = 0;
-    firefly_py::for_each_option([&](const char* name, auto get) {
+    list([&](const char* name, auto get) {
         if (!kw.contains(name)) return;
         auto& member = get(o);
         member = option_from_python<std::remove_reference_t<decltype(member)>>(name, kw[name]);
         ++used;
     });
-    if (used != kw.size())
-        for (const auto& item : kw) {
-            bool known = false;
-            firefly_py::for_each_option([&](const char* name, auto) { known |= item.first.cast<std::string>() == name; });
-            if (!known)
-                throw py::type_error("Detector() got an unexpected keyword argument '" + item.first.cast<std::string>() + "'");
-        }
+    return used;
+}
+
+// TypeError for the first keyword of kw that `list` does not name (nor `extra`).
+template <class List>
+void refuse_unknown(const py::kwargs& kw, List&& list, const char* cls, const char* extra = "") {
+    for (const auto& item : kw) {
+        const std::string key = item.first.cast<std::string>();
+        bool known = key == extra;
+        list([&](const char* name, auto) { known |= key == name; });
+        if (!known) throw py::type_error(std::string(cls) + " got an unexpected keyword argument '" + key + "'");
+    }
+}
+
+constexpr auto detector_option_list = [](auto&& f) { firefly_py::for_each_option(f); };
+constexpr auto buffer_option_list = [](auto&& f) { firefly_py::for_each_buffer_option(f); };
+
+detector_options options_from_kwargs(const py::kwargs& kw, const char* cls = "Detector()") {
+    detector_options o;
+    if (read_options(kw, o, detector_option_list) != kw.size()) refuse_unknown(kw, detector_option_list, cls);
     if (const status st = firefly::check_options(o); !st.ok()) throw py::value_error(st.message());
+    return o;
+}
+
+// BufferDetector's keywords; `pair` is a dict of Detector's (K = 2).
+cross_buffer_options buffer_options_from_kwargs(const py::kwargs& kw) {
+    cross_buffer_options o;
+    std::size_t used = read_options(kw, o, buffer_option_list);
+    if (kw.contains("pair")) {
+        const py::object pair = kw["pair"];
+        if (!py::isinstance<py::dict>(pair)) throw py::type_error("pair must be a dict of Detector() keywords");
+        o.pair = options_from_kwargs(py::reinterpret_borrow<py::kwargs>(pair), "BufferDetector(pair=...)");
+        ++used;
+    }
+    if (used != kw.size()) refuse_unknown(kw, buffer_option_list, "BufferDetector()", "pair");
+    if (const status st = firefly::check_cross_buffer_options(o); !st.ok()) throw py::value_error(st.message());
     return o;
 }
 
 py::dict options_to_dict(detector_options o) {
     py::dict d;
     firefly_py::for_each_option([&](const char* name, auto get) { d[name] = option_to_python(get(o)); });
+    return d;
+}
+
+py::dict buffer_options_to_dict(cross_buffer_options o) {
+    py::dict d;
+    firefly_py::for_each_buffer_option([&](const char* name, auto get) { d[name] = option_to_python(get(o)); });
+    d["pair"] = options_to_dict(o.pair);
     return d;
 }
 
@@ -156,6 +195,21 @@ py::dict frame_to_dict(const frame_report& r) {
     return d;
 }
 
+py::list per_buffer_list(const cross_buffer_report& r) {
+    py::list l;
+    for (const std::size_t n : r.per_buffer) l.append(n);
+    return l;
+}
+
+// K buffers: the fields, per_buffer as a list, and (K = 2) the pair detector's report.
+py::dict buffer_report_to_dict(const cross_buffer_report& r) {
+    py::dict d;
+    firefly_py::for_each_buffer_field([&](const char* name, auto member) { d[name] = field_to_python<false>(r.*member); });
+    d["per_buffer"] = per_buffer_list(r);
+    d["pair"] = r.buffers == 2 ? py::object(frame_to_dict(r.pair)) : py::none();
+    return d;
+}
+
 std::string half_repr(const half_report& h) {
     return "HalfReport(" + py::repr(half_to_dict(h)).cast<std::string>() + ")";
 }
@@ -187,6 +241,24 @@ void bind_reports(py::module_& m) {
     frame.def("as_dict", &frame_to_dict, "The same fields as plain Python types (for json.dump).");
     frame.def("__repr__", [](const frame_report& r) {
         return "FrameReport(" + py::repr(frame_to_dict(r)).cast<std::string>() + ")";
+    });
+
+    py::class_<cross_buffer_report> buffers(m, "BufferReport",
+                                            "The report of one frame of K buffers (BufferDetector).");
+    firefly_py::for_each_buffer_field([&](const char* name, auto member) {
+        buffers.def_property_readonly(name, [member](const cross_buffer_report& r) { return field_to_python<true>(r.*member); });
+    });
+    buffers.def_property_readonly(
+        "per_buffer", &per_buffer_list,
+        "Fireflies and non-finite pixels rebuilt, per buffer (a list of K).");
+    buffers.def_property_readonly(
+        "pair", [](const cross_buffer_report& r) { return r.buffers == 2 ? py::cast(r.pair) : py::none(); },
+        "K = 2: the two-half Detector's FrameReport (the paper's method); else None.");
+    buffers.def_property_readonly("ok", &cross_buffer_report::ok,
+                                  "True when the frame was checked and no pixel was left unrebuilt.");
+    buffers.def("as_dict", &buffer_report_to_dict, "The same fields as plain Python types (for json.dump).");
+    buffers.def("__repr__", [](const cross_buffer_report& r) {
+        return "BufferReport(" + py::repr(buffer_report_to_dict(r)).cast<std::string>() + ")";
     });
 }
 
@@ -244,13 +316,17 @@ image_view<T> view_of(const char* name, const py::array& a, std::initializer_lis
 // ---------------------------------------------------------------------------------------
 // The detector.
 
-struct py_detector {
-    py_detector(const detector_options& o, int threads)
+// A library detector (two halves or K buffers), its pool and its lock.
+template <class D, class O>
+struct py_detector_of {
+    py_detector_of(const O& o, int threads)
         : det(o, firefly::executor::threads(static_cast<unsigned>(threads))), threads(threads) {}
-    firefly::detector det;
+    D det;
     int threads;
     std::mutex busy;  // one frame at a time per detector (it owns scratch memory)
 };
+using py_detector = py_detector_of<firefly::detector, detector_options>;
+using py_buffer_detector = py_detector_of<firefly::cross_buffer_detector, cross_buffer_options>;
 
 struct process_args {
     py::object a_color, a_variance, b_color, b_variance, a_alpha, b_alpha, a_mask, b_mask;
@@ -274,8 +350,9 @@ image_view<std::uint8_t> mask_of(const char* name, py::handle mask) {
 }
 
 // Refused inputs and options raise; a frame that was processed returns its report, also
-// when some pixels had no usable source (report.ok is then False, as in C++).
-frame_report checked(const frame_report& r) {
+// when some pixels had no usable source or were left (report.ok is then False, as in C++).
+template <class Report>
+Report checked(const Report& r) {
     if (!r.ok() && r.error.code() != firefly::errc::no_valid_pixels) throw py::value_error(r.error.message());
     return r;
 }
@@ -300,15 +377,28 @@ frame_report run_typed(py_detector& d, const process_args& p, const char* dtype_
     return checked(r);
 }
 
+template <class T>
+struct type_tag {
+    using type = T;
+};
+
+// f(type_tag<T>{}, dtype_text) with T the channel type of array `a` named `name` (float or
+// double; const unless in_place), or TypeError.
+template <bool in_place, class F>
+auto by_dtype(const py::array& a, const std::string& name, F&& f) {
+    if (py::isinstance<py::array_t<float>>(a))
+        return f(type_tag<std::conditional_t<in_place, float, const float>>{}, ("float32 (like " + name + ")").c_str());
+    if (py::isinstance<py::array_t<double>>(a))
+        return f(type_tag<std::conditional_t<in_place, double, const double>>{}, ("float64 (like " + name + ")").c_str());
+    throw py::type_error(name + " must be float32 or float64, not " + py::str(a.dtype()).cast<std::string>());
+}
+
 // process() (in place) or detect() (read only), on float32 or float64 arrays.
 template <bool in_place>
 frame_report run(py_detector& d, const process_args& p) {
-    const py::array a = as_array("a_color", p.a_color);
-    if (py::isinstance<py::array_t<float>>(a))
-        return run_typed<std::conditional_t<in_place, float, const float>>(d, p, "float32 (like a_color)");
-    if (py::isinstance<py::array_t<double>>(a))
-        return run_typed<std::conditional_t<in_place, double, const double>>(d, p, "float64 (like a_color)");
-    throw py::type_error("a_color must be float32 or float64, not " + py::str(a.dtype()).cast<std::string>());
+    return by_dtype<in_place>(as_array("a_color", p.a_color), "a_color", [&](auto type, const char* dtype_text) {
+        return run_typed<typename decltype(type)::type>(d, p, dtype_text);
+    });
 }
 
 std::string detector_doc() {
@@ -349,31 +439,154 @@ void def_run(py::class_<py_detector>& c, const char* name, const char* doc) {
         py::arg("b_mask") = py::none());
 }
 
+// A detector class: keyword constructor (threads and options), options, threads and repr.
+template <class PyDet, class FromKwargs, class ToDict>
+py::class_<PyDet> detector_class(py::module_& m, const char* name, const std::string& doc, FromKwargs from_kwargs,
+                                 ToDict to_dict, const char* options_doc) {
+    py::class_<PyDet> c(m, name, doc.c_str());
+    c.def(py::init([from_kwargs](int threads, const py::kwargs& kw) {
+              if (threads < 1) throw py::value_error("threads must be >= 1");
+              return new PyDet(from_kwargs(kw), threads);
+          }),
+          py::kw_only(), py::arg("threads") = 1)
+        .def_property_readonly("options", [to_dict](const PyDet& d) { return to_dict(d.det.options()); }, options_doc)
+        .def_property_readonly("threads", [](const PyDet& d) { return d.threads; })
+        .def("__repr__", [name, to_dict](const PyDet& d) {
+            std::string s = std::string(name) + "(threads=" + std::to_string(d.threads);
+            const py::dict options = to_dict(d.det.options());
+            for (auto item : options)
+                s += ", " + item.first.cast<std::string>() + "=" + py::repr(item.second).cast<std::string>();
+            return s + ")";
+        });
+    return c;
+}
+
 void bind_detector(py::module_& m) {
-    py::class_<py_detector> c(m, "Detector", detector_doc().c_str());
-    c.def(py::init([](int threads, const py::kwargs& kw) {
-                 if (threads < 1) throw py::value_error("threads must be >= 1");
-                 return new py_detector(options_from_kwargs(kw), threads);
-             }),
-             py::kw_only(), py::arg("threads") = 1)
-        .def_property_readonly("options", [](const py_detector& d) { return options_to_dict(d.det.options()); },
-                               "The options, as a dict of keyword: value.")
-        .def_property_readonly("threads", [](const py_detector& d) { return d.threads; })
-        .def("__repr__",
-             [](const py_detector& d) {
-                 std::string s = "Detector(threads=" + std::to_string(d.threads);
-                 for (auto item : options_to_dict(d.det.options()))
-                     s += ", " + item.first.cast<std::string>() + "=" + py::repr(item.second).cast<std::string>();
-                 return s + ")";
-             });
+    auto c = detector_class<py_detector>(
+        m, "Detector", detector_doc(), [](const py::kwargs& kw) { return options_from_kwargs(kw); }, &options_to_dict,
+        "The options, as a dict of keyword: value.");
     def_run<true>(c, "process", process_doc);
     def_run<false>(c, "detect", detect_doc);
+}
+
+// ---------------------------------------------------------------------------------------
+// K buffers: a sequence of K arrays per argument (a list, a tuple, or an array whose first
+// axis is the buffers).
+
+// The items of a sequence argument (kept alive while their views are used), or TypeError.
+std::vector<py::object> items_of(const char* name, py::handle seq) {
+    if (py::isinstance<py::str>(seq) || !PySequence_Check(seq.ptr()))
+        throw py::type_error(std::string(name) + " must be a sequence of numpy arrays, one per buffer, not " +
+                             py::str(py::type::handle_of(seq).attr("__name__")).cast<std::string>());
+    // Owned references: an array's items are new view objects, freed when no one holds them.
+    const py::sequence s = py::reinterpret_borrow<py::sequence>(seq);
+    std::vector<py::object> out;
+    for (std::size_t i = 0; i < s.size(); ++i) out.push_back(py::object(s[i]));
+    return out;
+}
+
+// An optional sequence argument: none, or exactly k items.
+std::vector<py::object> optional_items(const char* name, py::handle seq, std::size_t k) {
+    if (seq.is_none()) return {};
+    std::vector<py::object> out = items_of(name, seq);
+    if (out.size() != k)
+        throw py::value_error(std::string(name) + " must hold one array per buffer (" + std::to_string(k) +
+                              " like colors), not " + std::to_string(out.size()));
+    return out;
+}
+
+struct buffer_args {
+    py::object colors, variances, masks;
+};
+
+template <class C>
+cross_buffer_report run_buffers_typed(py_buffer_detector& d, const std::vector<py::object>& colors, const buffer_args& p,
+                                      const char* dtype_text) {
+    const std::vector<py::object> variances = optional_items("variances", p.variances, colors.size());
+    const std::vector<py::object> masks = optional_items("masks", p.masks, colors.size());
+    std::vector<firefly::buffer_view<C>> views(colors.size());
+    std::vector<image_view<std::uint8_t>> mask_views;
+    for (std::size_t i = 0; i < colors.size(); ++i) {
+        const std::string at = "[" + std::to_string(i) + "]";
+        const std::string cn = "colors" + at, vn = "variances" + at, mn = "masks" + at;
+        views[i].color = view_of<C>(cn.c_str(), as_array(cn.c_str(), colors[i]), {1, 2, 3, 4}, dtype_text);
+        if (!variances.empty())
+            views[i].variance = view_of<C>(vn.c_str(), as_array(vn.c_str(), variances[i]), {1, 2, 3, 4}, dtype_text);
+        if (!masks.empty()) mask_views.push_back(view_of<std::uint8_t>(mn.c_str(), as_array(mn.c_str(), masks[i]), {1}, "uint8"));
+    }
+    cross_buffer_report r;
+    {
+        py::gil_scoped_release release;
+        std::lock_guard<std::mutex> lock(d.busy);
+        if constexpr (std::is_const_v<C>) {
+            r = d.det.detect(views, mask_views);
+        } else {
+            r = d.det.process(views, mask_views);
+        }
+    }
+    return checked(r);
+}
+
+// process() (in place) or detect() (read only), on float32 or float64 arrays.
+template <bool in_place>
+cross_buffer_report run_buffers(py_buffer_detector& d, const buffer_args& p) {
+    const std::vector<py::object> colors = items_of("colors", p.colors);
+    if (colors.empty()) throw py::value_error("colors must hold at least 2 buffers, not 0");
+    return by_dtype<in_place>(as_array("colors[0]", colors[0]), "colors[0]", [&](auto type, const char* dtype_text) {
+        return run_buffers_typed<typename decltype(type)::type>(d, colors, p, dtype_text);
+    });
+}
+
+std::string buffer_detector_doc() {
+    std::string s =
+        "BufferDetector(*, threads=1, **options)\n\n"
+        "Finds and removes fireflies across K >= 2 independent buffers of one frame (a renderer's\n"
+        "sample-index-split buffers, or N renders with different seeds): a buffer is judged against\n"
+        "the others at its own pixel and rebuilt from their mean. K = 2 is the two-half Detector\n"
+        "(variance needed; its options: pair={...}). Keep one per stream of frames. Options\n"
+        "(keyword: default):\n";
+    for (auto item : buffer_options_to_dict(cross_buffer_options{}))
+        s += "  " + item.first.cast<std::string>() + "=" + py::repr(item.second).cast<std::string>() + "\n";
+    return s;
+}
+
+const char* buffer_process_doc =
+    "process(colors, variances=None, masks=None)\n\n"
+    "Cleans the K buffers in place and returns a BufferReport. colors: K arrays (a list, a tuple, or\n"
+    "one (K, H, W, C) array), float32 or float64 (all alike), (H, W, C) with C 1 to 4, writeable, any\n"
+    "strides; variances: None or K arrays of the variance of each buffer's mean, 1 channel or as\n"
+    "many as colour (needed for K = 2; for K >= 3 the spread of the buffers estimates the noise);\n"
+    "masks: None or K uint8 (H, W) arrays receiving MASK_* bits. ValueError for sizes, channels, K\n"
+    "and options, TypeError for a non-array, a wrong dtype or a read-only array. A frame with pixels\n"
+    "left (more than K/2 buffers non-finite) returns a report with ok False (MASK_LEFT marks them).";
+
+const char* buffer_detect_doc =
+    "detect(colors, variances=None, masks=None)\n\n"
+    "Like process(), but writes only the masks and the report; the buffers are only read and may be\n"
+    "read-only.";
+
+template <bool in_place>
+void def_run_buffers(py::class_<py_buffer_detector>& c, const char* name, const char* doc) {
+    c.def(
+        name,
+        [](py_buffer_detector& d, py::object colors, py::object variances, py::object masks) {
+            return run_buffers<in_place>(d, buffer_args{colors, variances, masks});
+        },
+        doc, py::arg("colors"), py::arg("variances") = py::none(), py::arg("masks") = py::none());
+}
+
+void bind_buffer_detector(py::module_& m) {
+    auto c = detector_class<py_buffer_detector>(m, "BufferDetector", buffer_detector_doc(), &buffer_options_from_kwargs,
+                                                &buffer_options_to_dict,
+                                                "The options, as a dict of keyword: value (pair: a dict of Detector's).");
+    def_run_buffers<true>(c, "process", buffer_process_doc);
+    def_run_buffers<false>(c, "detect", buffer_detect_doc);
 }
 
 }  // namespace
 
 PYBIND11_MODULE(firefly, m) {
-    m.doc() = "firefly: removes fireflies from Monte Carlo renders using two half buffers (numpy, in place).";
+    m.doc() = "firefly: removes fireflies from Monte Carlo renders using two half buffers, or K buffers (numpy, in place).";
     m.attr("__version__") = version_string;
     m.attr("MASK_FIREFLY") = firefly::mask_bits::firefly;
     m.attr("MASK_HIGHLIGHT") = firefly::mask_bits::highlight;
@@ -384,4 +597,5 @@ PYBIND11_MODULE(firefly, m) {
     m.attr("MASK_LEFT") = firefly::mask_bits::left;
     bind_reports(m);
     bind_detector(m);
+    bind_buffer_detector(m);
 }

@@ -1,13 +1,19 @@
-// The C++ side of the Python module's round-trip test: cleans raw half buffers with the
-// library directly and prints the report, so the test can compare the module bit for bit.
+// The C++ side of the Python module's round-trip test: cleans raw half buffers (or K buffers)
+// with the library directly and prints the report, so the test can compare the module bit for
+// bit.
 //
 //   firefly_py_reference DTYPE WIDTH HEIGHT COLOR_CHANNELS VARIANCE_CHANNELS DIR [name=value ...]
+//   firefly_py_reference buffers K DTYPE WIDTH HEIGHT COLOR_CHANNELS VARIANCE_CHANNELS DIR [name=value ...]
 //
 // DTYPE is f4 or f8. DIR holds packed, C-order raw arrays a_color, a_variance, b_color,
 // b_variance, and optionally a_alpha and b_alpha; the cleaned colour and variance are written
 // back in place and the masks to a_mask and b_mask. Options are the module's keywords
 // (firefly_tables.hpp) plus threads=N. The report goes to stdout, one "name value" per line
 // ("a.fireflies 12"). Errors go to stderr with exit status 1.
+//
+// K buffers: DIR holds color_0 .. color_{K-1} and, unless VARIANCE_CHANNELS is 0, variance_0
+// ..; masks go to mask_0 ..; options are BufferDetector's keywords, pair.NAME for Detector's
+// (K = 2); the report prints as "fireflies 3", "per_buffer.0 1", "pair.a.fireflies 2".
 #include <cerrno>
 #include <cinttypes>
 #include <cstdio>
@@ -63,6 +69,21 @@ bool parse_value(const char* s, T& out) {
     }
 }
 
+// name = value into the options through the option list; false when either is unknown.
+template <class O, class List>
+bool set_listed(O& o, const std::string& name, const char* value, List&& list) {
+    bool found = false, ok = false;
+    list([&](const char* n, auto get) {
+        if (name != n) return;
+        found = true;
+        ok = parse_value(value, get(o));
+    });
+    return found && ok;
+}
+
+constexpr auto detector_option_list = [](auto&& f) { firefly_py::for_each_option(f); };
+constexpr auto buffer_option_list = [](auto&& f) { firefly_py::for_each_buffer_option(f); };
+
 // "name=value" into the options; false when the name or value is unknown.
 bool set_option(detector_options& o, const std::string& arg, int& threads) {
     const std::size_t eq = arg.find('=');
@@ -70,13 +91,18 @@ bool set_option(detector_options& o, const std::string& arg, int& threads) {
     const std::string name = arg.substr(0, eq);
     const char* value = arg.c_str() + eq + 1;
     if (name == "threads") return parse_value(value, threads);
-    bool found = false, ok = false;
-    firefly_py::for_each_option([&](const char* n, auto get) {
-        if (name != n) return;
-        found = true;
-        ok = parse_value(value, get(o));
-    });
-    return found && ok;
+    return set_listed(o, name, value, detector_option_list);
+}
+
+// The same for K buffers: "pair.NAME=value" sets Detector's option NAME (K = 2).
+bool set_buffer_option(firefly::cross_buffer_options& o, const std::string& arg, int& threads) {
+    const std::size_t eq = arg.find('=');
+    if (eq == std::string::npos) return false;
+    const std::string name = arg.substr(0, eq);
+    const char* value = arg.c_str() + eq + 1;
+    if (name == "threads") return parse_value(value, threads);
+    if (name.rfind("pair.", 0) == 0) return set_listed(o.pair, name.substr(5), value, detector_option_list);
+    return set_listed(o, name, value, buffer_option_list);
 }
 
 void print_value(const char* name, const firefly::status& s) { std::printf("%s %s\n", name, firefly_py::enum_name(s.code())); }
@@ -85,12 +111,18 @@ void print_value(const char* name, int v) { std::printf("%s %d\n", name, v); }
 void print_value(const char* name, std::size_t v) { std::printf("%s %zu\n", name, v); }
 void print_value(const char*, const double (&)[firefly::frame_report::stages]) {}  // timings differ per run
 
-void print_report(const firefly::frame_report& r) {
-    firefly_py::for_each_frame_field([&](const char* name, auto member) { print_value(name, r.*member); });
+void print_report(const firefly::frame_report& r, const std::string& prefix = "") {
+    firefly_py::for_each_frame_field([&](const char* name, auto member) { print_value((prefix + name).c_str(), r.*member); });
     for (int h = 0; h < 2; ++h)
         firefly_py::for_each_half_field([&](const char* name, auto member) {
-            print_value((std::string(h ? "b." : "a.") + name).c_str(), r.half[h].*member);
+            print_value((prefix + (h ? "b." : "a.") + name).c_str(), r.half[h].*member);
         });
+}
+
+void print_report(const firefly::cross_buffer_report& r) {
+    firefly_py::for_each_buffer_field([&](const char* name, auto member) { print_value(name, r.*member); });
+    for (std::size_t i = 0; i < r.per_buffer.size(); ++i) std::printf("per_buffer.%zu %zu\n", i, r.per_buffer[i]);
+    if (r.buffers == 2) print_report(r.pair, "pair.");
 }
 
 struct frame_spec {
@@ -129,21 +161,78 @@ int run(const frame_spec& s, const detector_options& o, int threads) {
     return 0;
 }
 
+// The options from argv[first ..] (set(o, arg, threads)), then run(T{}, o, threads) with T
+// float or double as dtype says.
+template <class O, class Set, class Run>
+int run_with(int argc, char** argv, int first, const std::string& dtype, O o, Set&& set, Run&& run) {
+    int threads = 1;
+    for (int i = first; i < argc; ++i)
+        if (!set(o, argv[i], threads)) return std::fprintf(stderr, "bad option: %s\n", argv[i]), 2;
+    if (dtype == "f4") return run(float{}, o, threads);
+    if (dtype == "f8") return run(double{}, o, threads);
+    std::fprintf(stderr, "dtype must be f4 or f8\n");
+    return 2;
+}
+
+struct buffers_spec {
+    int k = 0;
+    frame_spec frame;
+};
+
+// K buffers from DIR, cleaned by a cross_buffer_detector, written back; the report printed.
+template <class T>
+int run_buffers(const buffers_spec& s, const firefly::cross_buffer_options& o, int threads) {
+    const frame_spec& f = s.frame;
+    const std::size_t n = static_cast<std::size_t>(f.width) * static_cast<std::size_t>(f.height);
+    std::vector<std::vector<unsigned char>> color(static_cast<std::size_t>(s.k)), variance(color.size());
+    std::vector<std::vector<std::uint8_t>> mask(color.size(), std::vector<std::uint8_t>(n));
+    std::vector<firefly::buffer_view<T>> views(color.size());
+    std::vector<firefly::image_view<std::uint8_t>> masks;
+    auto path = [&](const char* what, std::size_t i) { return f.dir + "/" + what + "_" + std::to_string(i); };
+    for (std::size_t i = 0; i < color.size(); ++i) {
+        if (!read_file(path("color", i), color[i], n * f.nc * sizeof(T)) ||
+            (f.nv > 0 && !read_file(path("variance", i), variance[i], n * f.nv * sizeof(T))))
+            return std::fprintf(stderr, "cannot read buffer %zu in %s\n", i, f.dir.c_str()), 1;
+        views[i].color = *firefly::make_image_view(reinterpret_cast<T*>(color[i].data()), f.width, f.height, f.nc);
+        if (f.nv > 0)
+            views[i].variance = *firefly::make_image_view(reinterpret_cast<T*>(variance[i].data()), f.width, f.height, f.nv);
+        masks.push_back(*firefly::make_image_view(mask[i].data(), f.width, f.height));
+    }
+    firefly::cross_buffer_detector d(o, firefly::executor::threads(static_cast<unsigned>(threads)));
+    const firefly::cross_buffer_report r = d.process(views, masks);
+    if (!r.ok() && r.error.code() != firefly::errc::no_valid_pixels)  // like the module
+        return std::fprintf(stderr, "%s\n", r.error.message()), 1;
+    for (std::size_t i = 0; i < color.size(); ++i)
+        if (!write_file(path("color", i), color[i].data(), color[i].size()) ||
+            (f.nv > 0 && !write_file(path("variance", i), variance[i].data(), variance[i].size())) ||
+            !write_file(path("mask", i), mask[i].data(), n))
+            return 1;
+    print_report(r);
+    return 0;
+}
+
+int buffers_main(int argc, char** argv) {
+    if (argc < 9) {
+        std::fprintf(stderr, "usage: %s buffers K f4|f8 WIDTH HEIGHT COLOR_CHANNELS VARIANCE_CHANNELS DIR [name=value ...]\n",
+                     argv[0]);
+        return 2;
+    }
+    const buffers_spec s{std::atoi(argv[2]),
+                         {std::atoi(argv[4]), std::atoi(argv[5]), std::atoi(argv[6]), std::atoi(argv[7]), argv[8]}};
+    if (s.k < 1 || s.k > 64) return std::fprintf(stderr, "K must lie in [1, 64]\n"), 2;
+    return run_with(argc, argv, 9, argv[3], firefly::cross_buffer_options{}, set_buffer_option,
+                    [&](auto type, const auto& o, int threads) { return run_buffers<decltype(type)>(s, o, threads); });
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
+    if (argc > 1 && std::string(argv[1]) == "buffers") return buffers_main(argc, argv);
     if (argc < 7) {
         std::fprintf(stderr, "usage: %s f4|f8 WIDTH HEIGHT COLOR_CHANNELS VARIANCE_CHANNELS DIR [name=value ...]\n", argv[0]);
         return 2;
     }
-    frame_spec s{std::atoi(argv[2]), std::atoi(argv[3]), std::atoi(argv[4]), std::atoi(argv[5]), argv[6]};
-    detector_options o;
-    int threads = 1;
-    for (int i = 7; i < argc; ++i)
-        if (!set_option(o, argv[i], threads)) return std::fprintf(stderr, "bad option: %s\n", argv[i]), 2;
-    const std::string dtype = argv[1];
-    if (dtype == "f4") return run<float>(s, o, threads);
-    if (dtype == "f8") return run<double>(s, o, threads);
-    std::fprintf(stderr, "dtype must be f4 or f8\n");
-    return 2;
+    const frame_spec s{std::atoi(argv[2]), std::atoi(argv[3]), std::atoi(argv[4]), std::atoi(argv[5]), argv[6]};
+    return run_with(argc, argv, 7, argv[1], detector_options{}, set_option,
+                    [&](auto type, const auto& o, int threads) { return run<decltype(type)>(s, o, threads); });
 }

@@ -9,6 +9,7 @@
 #include <type_traits>
 #include <utility>
 
+#include <firefly/buffers.hpp>
 #include <firefly/pipeline.hpp>
 
 namespace firefly_py {
@@ -156,6 +157,40 @@ constexpr void for_each_frame_field(F&& f) {
     f("stage_ms", &R::stage_ms);  // a timing: differs from run to run
 }
 
+// Every cross_buffer_options member but `pair` (K = 2's detector_options, the keyword `pair`
+// taking for_each_option's keywords): f(name, get).
+template <class F>
+constexpr void for_each_buffer_option(F&& f) {
+    using O = firefly::cross_buffer_options;
+    f("alpha", [](O& o) -> auto& { return o.alpha; });
+    f("false_alarm", [](O& o) -> auto& { return o.false_alarm; });
+    f("use_variance", [](O& o) -> auto& { return o.use_variance; });
+    f("reconstruct", [](O& o) -> auto& { return o.reconstruct; });
+    f("refine_noise", [](O& o) -> auto& { return o.refine_noise; });
+    f("radius", [](O& o) -> auto& { return o.radius; });
+    f("return_energy", [](O& o) -> auto& { return o.return_energy; });
+    f("energy_sigma", [](O& o) -> auto& { return o.energy_sigma; });
+    f("energy_coarse_sigma", [](O& o) -> auto& { return o.energy_coarse_sigma; });
+}
+
+// Every cross_buffer_report field but `pair` (K = 2's frame_report) and `per_buffer` (a list):
+// f(name, member pointer).
+template <class F>
+constexpr void for_each_buffer_field(F&& f) {
+    using R = firefly::cross_buffer_report;
+    f("error", &R::error);
+    f("buffers", &R::buffers);
+    f("pixels", &R::pixels);
+    f("tested", &R::tested);
+    f("candidates", &R::candidates);
+    f("level", &R::level);
+    f("fireflies", &R::fireflies);
+    f("nonfinite", &R::nonfinite);
+    f("left", &R::left);
+    f("energy_removed", &R::energy_removed);
+    f("energy_returned", &R::energy_returned);
+}
+
 // ---------------------------------------------------------------------------------------
 // The option and half-report lists are complete: their counts are checked against the number
 // of members of the library's structs, so a member added there and not here stops the build.
@@ -205,7 +240,10 @@ static_assert(detail::count([](auto& c) { for_each_option(c); }) ==
               "for_each_option must list every detector_options member");
 static_assert(detail::count([](auto& c) { for_each_half_field(c); }) == detail::aggregate_size<firefly::half_report>(),
               "for_each_half_field must list every half_report member");
-// (frame_report is not counted: brace elision into its half[2] array makes the count
-// meaningless. Its fields are few and listed above.)
+static_assert(detail::count([](auto& c) { for_each_buffer_option(c); }) ==
+                  detail::aggregate_size<firefly::cross_buffer_options>() - 1,  // pair
+              "for_each_buffer_option must list every cross_buffer_options member");
+// (frame_report and cross_buffer_report, which holds one, are not counted: brace elision into
+// its half[2] array makes the count meaningless. Their fields are few and listed above.)
 
 }  // namespace firefly_py

@@ -15,13 +15,17 @@ from conftest import make_frame, same_bits
 NAMES = ["R", "G", "B", "Variance.R", "Variance.G", "Variance.B"]
 
 
-def readme_example():
+def readme_examples():
     path = os.environ.get("FIREFLY_README")
     if not path:
         pytest.skip("FIREFLY_README is not set (run the tests through ctest)")
     text = open(path, encoding="utf-8").read()
     section = text.split("\n## Python\n", 1)[1].split("\n## ", 1)[0]
-    return re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    return re.findall(r"```python\n(.*?)```", section, re.S)
+
+
+def readme_example():
+    return readme_examples()[0]
 
 
 def write_half(oiio, path, color, variance):
@@ -64,6 +68,27 @@ def test_readme_example_runs_and_matches(tmp_path):
         assert same_bits(clean, np.ascontiguousarray(px))
 
 
+def test_readme_buffers_example_runs_and_matches(tmp_path):
+    oiio = pytest.importorskip("OpenImageIO")
+    from test_buffers import make_buffers
+    code = readme_examples()[1]
+    assert len(code.strip().splitlines()) <= 8
+    colors, _, _ = make_buffers(k=4, seed=12, variance_channels=0)
+    for i, c in enumerate(colors):
+        spec = oiio.ImageSpec(c.shape[1], c.shape[0], 4, oiio.FLOAT)  # RGBA, as Blender writes
+        buf = oiio.ImageBuf(spec)
+        buf.set_pixels(oiio.ROI(), np.ascontiguousarray(np.concatenate([c, np.ones_like(c[..., :1])], axis=-1)))
+        assert buf.write(str(tmp_path / ("render_%d.exr" % i))), oiio.geterror()
+    done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    cleaned = np.stack(colors)
+    rep = firefly.BufferDetector().process(cleaned)
+    assert rep.fireflies >= 4
+    assert done.stdout.strip() == "%d fireflies removed from 4 renders" % rep.fireflies
+    clean = oiio.ImageBuf(str(tmp_path / "clean.exr")).get_pixels(oiio.FLOAT)
+    assert same_bits(clean, cleaned.mean(axis=0))
+
+
 def test_install_puts_an_importable_module_under_the_prefix(tmp_path):
     build, site = os.environ.get("FIREFLY_BUILD_DIR"), os.environ.get("FIREFLY_PYTHON_INSTALL_DIR")
     if not build or not site:
@@ -88,3 +113,5 @@ def test_readme_lists_every_option():
     section = text.split("\n## Python\n", 1)[1].split("\n## ", 1)[0]
     listed = re.search(r"flattened \((.*?)\), enums", section, re.S).group(1)
     assert set(re.findall(r"`(\w+)`", listed)) == set(firefly.Detector().options)
+    listed = re.search(r"member is a\s+keyword \((.*?)\), and `pair`", section, re.S).group(1)
+    assert set(re.findall(r"`(\w+)`", listed)) | {"pair"} == set(firefly.BufferDetector().options)
