@@ -123,6 +123,10 @@ cross_buffer_options buffer_options_from_kwargs(const py::kwargs& kw) {
     if (kw.contains("pair")) {
         const py::object pair = kw["pair"];
         if (!py::isinstance<py::dict>(pair)) throw py::type_error("pair must be a dict of Detector() keywords");
+        for (const auto& item : py::reinterpret_borrow<py::dict>(pair))  // (**kwargs keys are always str)
+            if (!py::isinstance<py::str>(item.first))
+                throw py::type_error("pair's keys must be strings (Detector() keywords), not " +
+                                     py::str(py::type::handle_of(item.first).attr("__name__")).cast<std::string>());
         o.pair = options_from_kwargs(py::reinterpret_borrow<py::kwargs>(pair), "BufferDetector(pair=...)");
         ++used;
     }
@@ -286,7 +290,7 @@ image_view<T> view_of(const char* name, const py::array& a, std::initializer_lis
     if (!py::isinstance<py::array_t<V>>(a))
         throw py::type_error(std::string(name) + " must be " + dtype_text + ", not " + py::str(a.dtype()).cast<std::string>());
     if (!std::is_const_v<T> && !a.writeable())
-        throw py::type_error(std::string(name) + " is read-only: firefly cleans it in place");
+        throw py::type_error(std::string(name) + " is read-only: firefly writes to it in place");
     if (a.ndim() != 2 && a.ndim() != 3)
         throw py::value_error(std::string(name) + " must have shape (H, W, C) or (H, W), not " +
                               py::str(a.attr("shape")).cast<std::string>());
@@ -473,22 +477,33 @@ void bind_detector(py::module_& m) {
 // K buffers: a sequence of K arrays per argument (a list, a tuple, or an array whose first
 // axis is the buffers).
 
-// The items of a sequence argument (kept alive while their views are used), or TypeError.
-std::vector<py::object> items_of(const char* name, py::handle seq) {
+// The items of a sequence argument (kept alive while their views are used): TypeError for a
+// non-sequence, ValueError for an array that is not (K, H, W, C) (masks: (K, H, W) too) or
+// more than 64 items.
+std::vector<py::object> items_of(const char* name, py::handle seq, bool masks = false) {
     if (py::isinstance<py::str>(seq) || !PySequence_Check(seq.ptr()))
         throw py::type_error(std::string(name) + " must be a sequence of numpy arrays, one per buffer, not " +
                              py::str(py::type::handle_of(seq).attr("__name__")).cast<std::string>());
+    // One array must be (K, H, W, C): a single (H, W, C) image would pass as H buffers.
+    const py::ssize_t ndim = py::isinstance<py::array>(seq) ? py::reinterpret_borrow<py::array>(seq).ndim() : 4;
+    if (ndim != 4 && !(masks && ndim == 3))
+        throw py::value_error(std::string(name) + " as one array must have shape " +
+                              (masks ? "(K, H, W) or (K, H, W, 1)" : "(K, H, W, C)") + ", not " +
+                              py::str(seq.attr("shape")).cast<std::string>());
     // Owned references: an array's items are new view objects, freed when no one holds them.
     const py::sequence s = py::reinterpret_borrow<py::sequence>(seq);
+    if (s.size() > static_cast<std::size_t>(firefly::detail::max_buffers))
+        throw py::value_error(std::string(name) + " holds " + std::to_string(s.size()) + " buffers: at most " +
+                              std::to_string(firefly::detail::max_buffers));
     std::vector<py::object> out;
     for (std::size_t i = 0; i < s.size(); ++i) out.push_back(py::object(s[i]));
     return out;
 }
 
 // An optional sequence argument: none, or exactly k items.
-std::vector<py::object> optional_items(const char* name, py::handle seq, std::size_t k) {
+std::vector<py::object> optional_items(const char* name, py::handle seq, std::size_t k, bool masks = false) {
     if (seq.is_none()) return {};
-    std::vector<py::object> out = items_of(name, seq);
+    std::vector<py::object> out = items_of(name, seq, masks);
     if (out.size() != k)
         throw py::value_error(std::string(name) + " must hold one array per buffer (" + std::to_string(k) +
                               " like colors), not " + std::to_string(out.size()));
@@ -503,7 +518,7 @@ template <class C>
 cross_buffer_report run_buffers_typed(py_buffer_detector& d, const std::vector<py::object>& colors, const buffer_args& p,
                                       const char* dtype_text) {
     const std::vector<py::object> variances = optional_items("variances", p.variances, colors.size());
-    const std::vector<py::object> masks = optional_items("masks", p.masks, colors.size());
+    const std::vector<py::object> masks = optional_items("masks", p.masks, colors.size(), true);
     std::vector<firefly::buffer_view<C>> views(colors.size());
     std::vector<image_view<std::uint8_t>> mask_views;
     for (std::size_t i = 0; i < colors.size(); ++i) {
@@ -555,10 +570,12 @@ const char* buffer_process_doc =
     "Cleans the K buffers in place and returns a BufferReport. colors: K arrays (a list, a tuple, or\n"
     "one (K, H, W, C) array), float32 or float64 (all alike), (H, W, C) with C 1 to 4, writeable, any\n"
     "strides; variances: None or K arrays of the variance of each buffer's mean, 1 channel or as\n"
-    "many as colour (needed for K = 2; for K >= 3 the spread of the buffers estimates the noise);\n"
-    "masks: None or K uint8 (H, W) arrays receiving MASK_* bits. ValueError for sizes, channels, K\n"
-    "and options, TypeError for a non-array, a wrong dtype or a read-only array. A frame with pixels\n"
-    "left (more than K/2 buffers non-finite) returns a report with ok False (MASK_LEFT marks them).";
+    "many as colour (needed for K = 2; optional from K = 3, where without them the spread of the\n"
+    "buffers estimates the noise; K = 3 uses them when given, K >= 4 with use_variance);\n"
+    "masks: None or K uint8 (H, W) arrays (or one (K, H, W)) receiving MASK_* bits. ValueError for\n"
+    "sizes, channels, K and options, TypeError for a non-array, a wrong dtype or a read-only array.\n"
+    "A frame with pixels left (more than K/2 buffers non-finite; K = 2: no usable value) returns a\n"
+    "report with ok False (MASK_LEFT marks them).";
 
 const char* buffer_detect_doc =
     "detect(colors, variances=None, masks=None)\n\n"

@@ -252,6 +252,19 @@ TEST_CASE("K buffers: more than half non-finite is left and reported", "[buffers
     CHECK(std::isnan(f.color[0][0]));
 }
 
+TEST_CASE("K buffers: two buffers report the pixels the pair detector left", "[buffers]") {
+    frame_k f = noisy_frame(2, 6, 5, 6);
+    for (auto& c : f.color) std::fill(c.begin(), c.end(), std::numeric_limits<float>::quiet_NaN());
+    masks_k mk(2, 6, 5);
+    cross_buffer_detector d;
+    const cross_buffer_report r = d.process(f.views(), mk.views);
+    CHECK(r.error.code() == errc::no_valid_pixels);
+    CHECK(r.pair.half[0].unreachable == 30);
+    CHECK(r.left == 30);  // was 0: K = 2 did not say what the masks and the pair report said
+    for (const auto& m : mk.mem)
+        for (const std::uint8_t b : m) CHECK(int(b) == int(mask_bits::nonfinite | mask_bits::left));
+}
+
 TEST_CASE("K buffers: inputs refused as status values", "[buffers]") {
     frame_k f = noisy_frame(3, 6, 6, 5);
     cross_buffer_detector d;

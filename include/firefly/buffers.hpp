@@ -168,6 +168,8 @@ struct [[nodiscard]] cross_buffer_report {
     std::size_t fireflies = 0;   // pixel-buffers flagged as fireflies (rebuilt if reconstruct)
     std::size_t nonfinite = 0;   // pixel-buffers with NaN/Inf, rebuilt from the others
     std::size_t left = 0;        // pixels with more than K / 2 non-finite buffers, unchanged
+                                 // (K = 2: those no usable value reached, the pair detector's
+                                 // unreachable; its counts above are what it found)
     std::vector<std::size_t> per_buffer;  // fireflies and non-finite, per buffer
     double energy_removed = 0;   // sum over pixels of the mean colour the fireflies took from
     double energy_returned = 0;  // the frame's mean image, and of what energy.hpp gave back
@@ -515,6 +517,7 @@ private:
             rep.fireflies += hr.fireflies;
             rep.nonfinite += hr.nonfinite;
             rep.per_buffer[static_cast<std::size_t>(i)] = hr.fireflies + hr.nonfinite;
+            rep.left = std::max(rep.left, hr.unreachable);  // pixels: the larger half's count
         }
         rep.tested = rep.pair.half[0].valid;
         return rep;

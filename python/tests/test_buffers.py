@@ -142,6 +142,15 @@ def test_an_array_of_buffers_is_a_sequence():
     assert rep.as_dict() == listed.as_dict()
 
 
+def test_two_buffers_report_what_the_pair_detector_left():
+    colors, variances, _ = make_buffers(k=2)
+    for c in colors:
+        c[:] = np.nan
+    c, v, m, rep = process(colors, variances)
+    assert not rep.ok and rep.left == rep.pair.half[0].unreachable == colors[0].shape[0] * colors[0].shape[1]
+    assert all((x == firefly.MASK_NONFINITE | firefly.MASK_LEFT).all() for x in m)
+
+
 def test_pixels_left_where_most_buffers_are_nan():
     colors, _, _ = make_buffers(k=5)
     for b in range(3):
@@ -204,6 +213,11 @@ def test_options_round_trip():
     (lambda c, v: firefly.BufferDetector(pair=3), TypeError, "pair must be a dict"),
     (lambda c, v: firefly.BufferDetector(pair={"alpha": 2.0}), ValueError, "alpha"),
     (lambda c, v: firefly.BufferDetector(threads=0), ValueError, "threads must be >= 1"),
+    (lambda c, v: firefly.BufferDetector(pair={b"alpha": 0.3}), TypeError, "keys must be strings"),
+    (lambda c, v: firefly.BufferDetector(pair={1: 2}), TypeError, "keys must be strings"),
+    (lambda c, v: firefly.BufferDetector().process(np.array(1.0)), ValueError, r"shape \(K, H, W, C\)"),
+    (lambda c, v: firefly.BufferDetector().process(c[0]), ValueError, r"shape \(K, H, W, C\)"),  # not H buffers
+    (lambda c, v: firefly.BufferDetector().process(range(10 ** 7)), ValueError, "at most 64"),
 ])
 def test_errors_raise_with_the_library_message(call, error, message):
     colors, variances, _ = make_buffers(k=4)
@@ -211,3 +225,41 @@ def test_errors_raise_with_the_library_message(call, error, message):
     with pytest.raises(error, match=message):
         call(colors, variances)
     assert all(same_bits(x, y) for x, y in zip(colors, before))  # refused: nothing written
+
+
+def test_gil_is_released_and_a_shared_detector_is_serialized():
+    import sys
+    import threading
+    big, _, _ = make_buffers(k=8, seed=4, height=512, width=512)
+    entered, state = threading.Event(), {"done": False}
+
+    def worker():
+        det = firefly.BufferDetector()
+        entered.set()
+        for _ in range(2):
+            det.detect(big)  # the GIL is released only inside
+        state["done"] = True
+
+    old = sys.getswitchinterval()
+    sys.setswitchinterval(1000.0)  # a thread holding the GIL keeps it until it blocks
+    try:
+        t = threading.Thread(target=worker)
+        t.start()
+        entered.wait()
+        done_when_we_ran = state["done"]  # had detect() kept the GIL, the worker had finished
+    finally:
+        sys.setswitchinterval(old)
+        t.join()
+    assert not done_when_we_ran and state["done"]
+
+    det = firefly.BufferDetector()
+    frames = [make_buffers(k=4, seed=s)[0] for s in range(40, 44)]
+    reference = [process(f, None)[0] for f in frames]
+    copies = [[c.copy() for c in f] for f in frames]
+    threads = [threading.Thread(target=det.process, args=(copies[i],)) for i in range(len(frames))]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    for got, ref in zip(copies, reference):
+        assert all(same_bits(x, y) for x, y in zip(got, ref))
