@@ -1,5 +1,6 @@
 // Defects of earlier versions, each pinned by a test that failed before its fix.
 #include <firefly/firefly.hpp>
+#include <firefly/buffers.hpp>
 
 #include <cfloat>
 #include <cmath>
@@ -154,6 +155,49 @@ TEST_CASE("colour and variance interleaved in one 6-channel image are not an ove
     const frame_report r = d.process(hb[0], hb[1]);
     REQUIRE(r.error.ok());
     CHECK(r.half[0].fireflies >= 1);
+}
+
+TEST_CASE("buffers interleaved element by element are not an overlap", "[reliability][image_view]") {
+    // K = 4 buffers stacked innermost: memory (H, W, C, K), buffer k a view with channel stride
+    // K floats and pixel stride C K floats (numpy's np.stack(buffers, -1).transpose(3, 0, 1, 2))
+    const int w = 10, h = 6, c = 3, k = 4;
+    std::vector<float> mem(static_cast<std::size_t>(w * h * c * k));
+    std::vector<image_view<float>> v;
+    for (int i = 0; i < k; ++i)
+        v.push_back(*image_view<float>::create(mem.data() + i, w, h, c, c * k * 4, w * c * k * 4, k * 4));
+    for (int i = 0; i < k; ++i)
+        for (int j = 0; j < k; ++j) CHECK(views_may_overlap(v[static_cast<std::size_t>(i)], v[static_cast<std::size_t>(j)]) == (i == j));
+    // a view two bytes off shares bytes with its neighbours; a double view spans two floats
+    auto* bytes = reinterpret_cast<unsigned char*>(mem.data());
+    const auto off = *image_view<float>::create(reinterpret_cast<float*>(bytes + 2), w, h, c, c * k * 4, w * c * k * 4, k * 4);
+    CHECK(views_may_overlap(v[0], off));
+    CHECK(views_may_overlap(off, v[1]));
+    std::vector<double> dmem(static_cast<std::size_t>(w * h * c * 2));
+    const auto d0 = *image_view<double>::create(dmem.data(), w, h, c, c * 2 * 8, w * c * 2 * 8, 2 * 8);
+    const auto f1 = *image_view<float>::create(reinterpret_cast<float*>(dmem.data()) + 1, w, h, c, c * 2 * 8, w * c * 2 * 8, 2 * 8);
+    const auto f2 = *image_view<float>::create(reinterpret_cast<float*>(dmem.data()) + 2, w, h, c, c * 2 * 8, w * c * 2 * 8, 2 * 8);
+    CHECK(views_may_overlap(d0, f1));  // inside the double
+    CHECK_FALSE(views_may_overlap(d0, f2));
+    // the detector takes them: K buffers cleaned in place, the same bits as separate buffers
+    std::vector<std::vector<float>> sep(static_cast<std::size_t>(k));
+    for (int i = 0; i < k; ++i) {
+        sep[static_cast<std::size_t>(i)] = noisy<float>(w, h, c, 70u + static_cast<unsigned>(i));
+        for (int p = 0; p < w * h * c; ++p) mem[static_cast<std::size_t>(p * k + i)] = sep[static_cast<std::size_t>(i)][static_cast<std::size_t>(p)];
+    }
+    sep[1][static_cast<std::size_t>((2 * w + 3) * c)] = mem[static_cast<std::size_t>((2 * w + 3) * c * k + 1)] = 500.0f;
+    std::vector<buffer_view<float>> inter, apart;
+    for (int i = 0; i < k; ++i) {
+        inter.push_back({v[static_cast<std::size_t>(i)], {}});
+        apart.push_back({*make_image_view(sep[static_cast<std::size_t>(i)].data(), w, h, c), {}});
+    }
+    cross_buffer_detector d1, d2;
+    const cross_buffer_report r1 = d1.process(inter), r2 = d2.process(apart);
+    REQUIRE(r1.error.ok());
+    CHECK(r1.fireflies == r2.fireflies);
+    CHECK(r1.fireflies >= 1);
+    for (int i = 0; i < k; ++i)
+        for (int p = 0; p < w * h * c; ++p)
+            CHECK(mem[static_cast<std::size_t>(p * k + i)] == sep[static_cast<std::size_t>(i)][static_cast<std::size_t>(p)]);
 }
 
 TEST_CASE("a stride of PTRDIFF_MIN is refused, not negated", "[reliability][image_view]") {

@@ -316,14 +316,53 @@ byte_extent extent_of(const image_view<T>& v) noexcept {
     return {base + static_cast<std::uintptr_t>(lo), base + static_cast<std::uintptr_t>(hi) + sizeof(T)};
 }
 
-// Whether two views may share a byte. Exact for views whose extents are apart and for two
+namespace detail {
+inline std::uintptr_t stride_gcd(std::uintptr_t g, std::ptrdiff_t stride) noexcept {
+    std::uintptr_t v = stride < 0 ? std::uintptr_t{0} - static_cast<std::uintptr_t>(stride) : static_cast<std::uintptr_t>(stride);
+    while (v != 0) {
+        const std::uintptr_t t = g % v;
+        g = v;
+        v = t;
+    }
+    return g;
+}
+
+// Whether the elements of a and b lie on disjoint residues of one lattice: every element
+// starts at its view's origin plus a sum of strides, so modulo g, the gcd of all six strides,
+// a's elements start at pa and b's at pb (a stride taken by no step, as that of a single
+// channel, does not count); they share no byte when the gap r = (pb - pa) mod g
+// leaves room for both element sizes (r >= sizeof A, g - r >= sizeof B). K buffers stacked
+// innermost ((H, W, C, K) memory, each buffer a view with channel stride K elements), or
+// colour and variance interleaved channel by channel, are disjoint so.
+template <class A, class B>
+bool lattice_disjoint(const image_view<A>& a, const image_view<B>& b) noexcept {
+    std::uintptr_t g = 0;
+    auto add = [&g](const auto& v) {  // a stride only counts where it is taken
+        if (v.width() > 1) g = stride_gcd(g, v.pixel_stride());
+        if (v.height() > 1) g = stride_gcd(g, v.row_stride());
+        if (v.channels() > 1) g = stride_gcd(g, v.channel_stride());
+    };
+    add(a);
+    add(b);
+    if (g == 0) return false;
+    const std::uintptr_t pa = reinterpret_cast<std::uintptr_t>(a.data()) % g;
+    const std::uintptr_t pb = reinterpret_cast<std::uintptr_t>(b.data()) % g;
+    const std::uintptr_t r = (pb + g - pa) % g;
+    return r >= sizeof(A) && g - r >= sizeof(B);
+}
+}  // namespace detail
+
+// Whether two views may share a byte. Exact for views whose extents are apart, for two
 // interleaved views with the same pixel and row strides (colour and variance as channels
 // [0, 3) and [3, 6) of one 6-channel image, the layout OpenImageIO gives for an EXR holding
-// both); any other interleaving of extents is taken as an overlap.
+// both), and for views on disjoint residues of their strides' lattice (detail::
+// lattice_disjoint: buffers interleaved element by element); any other interleaving of
+// extents is taken as an overlap.
 template <class A, class B>
 bool views_may_overlap(const image_view<A>& a, const image_view<B>& b) noexcept {
     const byte_extent ea = extent_of(a), eb = extent_of(b);
     if (ea.empty() || eb.empty() || ea.last <= eb.first || eb.last <= ea.first) return false;
+    if (detail::lattice_disjoint(a, b)) return false;
     const std::ptrdiff_t ps = a.pixel_stride();
     if (ps <= 0 || ps != b.pixel_stride() || a.row_stride() != b.row_stride() || a.row_stride() % ps != 0)
         return true;

@@ -142,6 +142,15 @@ def test_an_array_of_buffers_is_a_sequence():
     assert rep.as_dict() == listed.as_dict()
 
 
+def test_buffers_interleaved_innermost_are_not_an_overlap():
+    colors, _, _ = make_buffers(k=4, seed=21)
+    inner = np.stack(colors, -1).transpose(3, 0, 1, 2)  # memory (H, W, C, K): disjoint, interleaved
+    rep = firefly.BufferDetector().process(inner)
+    c, _, _, apart = process(colors, None)
+    assert rep.as_dict() == apart.as_dict() and rep.fireflies >= 4
+    assert same_bits(np.ascontiguousarray(inner), np.stack(c))
+
+
 def test_two_buffers_report_what_the_pair_detector_left():
     colors, variances, _ = make_buffers(k=2)
     for c in colors:
