@@ -97,6 +97,36 @@ def report_as_text(rep):
     return out
 
 
+def assert_gil_released(call, repeat=3):
+    """Asserts that call() (a long library call) releases the GIL: under a switch interval so
+    long that a thread holding the GIL is never interrupted, this thread runs again while the
+    worker is still inside its calls. No timing."""
+    import sys
+    import threading
+    entered, state = threading.Event(), {"done": False}
+
+    def worker():
+        entered.set()
+        for _ in range(repeat):  # a long window for this thread to be scheduled in
+            call()  # the GIL is released only inside
+        state["done"] = True
+
+    old = sys.getswitchinterval()
+    sys.setswitchinterval(1000.0)  # a thread holding the GIL keeps it until it blocks
+    try:
+        t = threading.Thread(target=worker)
+        t.start()
+        entered.wait()
+        # This thread runs again only once the worker gives up the GIL. Had the call kept it,
+        # that would be after the calls returned and `done` was set.
+        done_when_we_ran = state["done"]
+    finally:
+        sys.setswitchinterval(old)
+        t.join()
+    assert not done_when_we_ran
+    assert state["done"]
+
+
 def same_bits(x, y):
     return x.dtype == y.dtype and x.shape == y.shape and np.ascontiguousarray(x).tobytes() == np.ascontiguousarray(y).tobytes()
 

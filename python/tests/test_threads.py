@@ -2,13 +2,12 @@
 in parallel; their results equal the serial ones. No timing: the release is shown by the
 order of events under a switch interval so long that a thread holding the GIL is never
 interrupted."""
-import sys
 import threading
 
 import numpy as np
 
 import firefly
-from conftest import arrays_of, make_frame, report_as_text, same_bits
+from conftest import arrays_of, assert_gil_released, make_frame, report_as_text, same_bits
 
 
 def cleaned(frame, threads=1):
@@ -19,29 +18,8 @@ def cleaned(frame, threads=1):
 
 def test_gil_is_released_during_process():
     big = arrays_of(make_frame(height=1024, width=1024, seed=3))
-    entered, state = threading.Event(), {"done": False}
-
-    def worker():
-        det = firefly.Detector()
-        entered.set()
-        for _ in range(3):  # a long window (~0.3 s) for this thread to be scheduled in
-            det.process(**big)  # the GIL is released only inside
-        state["done"] = True
-
-    old = sys.getswitchinterval()
-    sys.setswitchinterval(1000.0)  # a thread holding the GIL keeps it until it blocks
-    try:
-        t = threading.Thread(target=worker)
-        t.start()
-        entered.wait()
-        # This thread runs again only once the worker gives up the GIL. Had process() kept
-        # it, that would be after process() returned and `done` was set.
-        done_when_we_ran = state["done"]
-    finally:
-        sys.setswitchinterval(old)
-        t.join()
-    assert not done_when_we_ran
-    assert state["done"]
+    det = firefly.Detector()
+    assert_gil_released(lambda: det.process(**big))
 
 
 def test_two_threads_two_detectors_equal_the_serial_results():
