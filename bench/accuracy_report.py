@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """Turns firefly_accuracy's JSON (--benchmark_format=json) and bench/downstream.py's NL-means
 results into docs/accuracy.md: per-scene tables, a plot of accuracy against time (a Pareto
-front), and which of the issues' targets are met.
+front), and which of the project's accuracy targets are met.
 
     /usr/bin/python3 bench/accuracy_report.py accuracy.json --downstream downstream.json \\
         --merged docs/accuracy.json --plot docs/accuracy_vs_time.png > docs/accuracy.md
@@ -178,7 +178,7 @@ def summary_table(summary):
 
 
 # ---------------------------------------------------------------------------------------
-# Targets stated by the issues, checked on whatever scenes the run has.
+# The accuracy targets, by group, checked on whatever scenes the run has.
 
 class Targets:
     def __init__(self, rows):
@@ -190,8 +190,8 @@ class Targets:
     def get(self, sc, m):
         return self.at.get((sc, m))
 
-    def add(self, issue, target, scene, measured, met):
-        self.lines.append((issue, target, scene, measured, met))
+    def add(self, group, target, scene, measured, met):
+        self.lines.append((group, target, scene, measured, met))
 
     def keeping_peers(self, sc):
         """The peers that keep highlights, a property of the method: their median share of
@@ -211,7 +211,7 @@ class Targets:
         for sc in self.scenes:
             r = self.get(sc, "firefly")
             if r and r["recall"] is not None:
-                self.add("base", "recall >= 0.99, false pos. <= 0.1%, highlights kept >= 0.99", sc,
+                self.add("detection", "recall >= 0.99, false pos. <= 0.1%, highlights kept >= 0.99", sc,
                          f"{r['recall']:.4f}, {pct(r['false_positive'])}, {r['highlight_kept']:.4f}", meets(r))
 
     def downstream(self):
@@ -222,7 +222,7 @@ class Targets:
                 continue
             best = min(peers, key=lambda p: p["ds"])
             base = r["recall"] is None or meets(r)  # and the detection targets still met (simulated)
-            self.add("9.6", "after NL-means: firefly lowest of the highlight-keeping prefilters"
+            self.add("downstream", "after NL-means: firefly lowest of the highlight-keeping prefilters"
                      + ("" if r["recall"] is None else ", detection targets met"), sc,
                      # a tie is the lowest too: a frame without fireflies that firefly and the
                      # best peer both leave exactly as it was gives both the denoiser's own result
@@ -233,33 +233,33 @@ class Targets:
             r, cy, inp = self.get(sc, "firefly"), self.get(sc, "cycles_prefilter"), self.get(sc, "input")
             if not (r and cy and inp):
                 continue
-            self.add("15.3", "relMSE below the Cycles prefilter's", sc, f"{r['relmse']:.4g} vs {cy['relmse']:.4g}",
+            self.add("interiors", "relMSE below the Cycles prefilter's", sc, f"{r['relmse']:.4g} vs {cy['relmse']:.4g}",
                      r["relmse"] < cy["relmse"])
             if r["ds"] is not None and inp["ds"] is not None:
-                self.add("15.3", "after NL-means no worse than the denoiser alone", sc,
+                self.add("interiors", "after NL-means no worse than the denoiser alone", sc,
                          f"{r['ds']:.4g} vs {inp['ds']:.4g}", r["ds"] <= inp["ds"])
 
     def brightness(self):
         r, cy = self.get("decades", "firefly"), self.get("decades", "cycles_prefilter")
         if r and cy:
-            self.add("17.3", "three decades: recall >= 0.99, false pos. <= 0.1%, relMSE below Cycles'", "decades",
+            self.add("brightness", "three decades: recall >= 0.99, false pos. <= 0.1%, relMSE below Cycles'", "decades",
                      f"{r['recall']:.4f}, {pct(r['false_positive'])}, {r['relmse']:.4g} vs {cy['relmse']:.4g}",
                      r["recall"] >= 0.99 and r["false_positive"] <= 0.001 and r["relmse"] < cy["relmse"])
         for sc in [s for s in self.scenes if s == "fog" or s.startswith("null_")]:
             r, inp = self.get(sc, "firefly"), self.get(sc, "input")
             if r and inp:
-                self.add("17.2/17.3", "no fireflies: pixels changed <= 0.1%, relMSE no worse than the input's", sc,
+                self.add("calibration", "no fireflies: pixels changed <= 0.1%, relMSE no worse than the input's", sc,
                          f"{pct(r['changed'])}, {r['relmse']:.4g} vs {inp['relmse']:.4g}",
                          r["changed"] <= 0.001 and r["relmse"] <= inp["relmse"])
         worse = [self.get(sc, "firefly") for sc in self.scenes]
         worse = [r for r in worse if r and r["changed"]]
         for r in [r for r in worse if not is_sim(r)]:
-            self.add("17.4", "changed pixels made worse than the input (reported)", r["scene"],
+            self.add("made worse", "changed pixels made worse than the input (reported)", r["scene"],
                      f"{pct(r['worse'])} of pixels, {r['worse_of_changed']:.2f} of changed", None)
         sims = [r for r in worse if is_sim(r)]
         if sims:
             top = max(sims, key=lambda r: r["worse"])
-            self.add("17.4", "changed pixels made worse than the input (reported; every scene in its table)",
+            self.add("made worse", "changed pixels made worse than the input (reported; every scene in its table)",
                      f"simulated, worst: {top['scene']}",
                      f"{pct(top['worse'])} of pixels, {top['worse_of_changed']:.2f} of changed", None)
 
@@ -267,7 +267,7 @@ class Targets:
         for sc in ("dense10", "dense30"):
             r = self.get(sc, "firefly")
             if r:
-                self.add("9.4", "dense: recall >= 0.99, highlights kept >= 0.99", sc,
+                self.add("dense", "dense: recall >= 0.99, highlights kept >= 0.99", sc,
                          f"{r['recall']:.4f}, {r['highlight_kept']:.4f}",
                          r["recall"] >= 0.99 and r["highlight_kept"] >= 0.99)
 
@@ -283,21 +283,21 @@ class Targets:
             if not sc.startswith("null_"):  # no fireflies: the target there is the mean's
                 hl = r.get("highlight_not_lowered")  # energy return adds light to highlights,
                 strict = r.get("highlight_kept")      # takes none: kept, but not unchanged
-                self.add("18.4", "relMSE below G-MoN's (its best threshold and grouping), highlights kept "
+                self.add("K buffers", "relMSE below G-MoN's (its best threshold and grouping), highlights kept "
                          "(not lowered) >= 0.99", sc,
                          f"{r['method']} {r['relmse']:.4g} vs {best['method']} {best['relmse']:.4g}"
                          + ("" if hl is None else f", highlights not lowered {hl:.3f} (unchanged {strict:.3f})"),
                          r["relmse"] < best["relmse"] and (hl is None or hl >= 0.99))
             mean = [x for (s, m), x in self.at.items() if s == sc and m.startswith("mean_k")]
             if sc.startswith("null_") and mean:
-                self.add("18.4", "no fireflies: relMSE no worse than the mean of the buffers", sc,
+                self.add("K buffers", "no fireflies: relMSE no worse than the mean of the buffers", sc,
                          f"{r['method']} {r['relmse']:.4g} vs {mean[0]['relmse']:.4g}", r["relmse"] <= mean[0]["relmse"])
 
     def print(self):
-        print("| issue | target | scene | measured (firefly at defaults) | met |")
+        print("| group | target | scene | measured (firefly at defaults) | met |")
         print("|---|---|---|---|:---:|")
-        for issue, target, sc, measured, met in self.lines:
-            print(f"| {issue} | {target} | {sc} | {measured} | {'-' if met is None else ('yes' if met else '**no**')} |")
+        for group, target, sc, measured, met in self.lines:
+            print(f"| {group} | {target} | {sc} | {measured} | {'-' if met is None else ('yes' if met else '**no**')} |")
         print()
         checked = [m for *_, m in self.lines if m is not None]
         print(f"{sum(checked)} of {len(checked)} checked targets met. Highlight-keeping peers in this run: "
@@ -450,7 +450,7 @@ the mean (below T, the paper's 0.25) or the median of means (at or above it); th
 0.25 and 0.4 are run and the targets compare against the best. On two halves (K = 2) all three
 are the mean of the halves, so their rows are left out of the per-scene tables there.
 
-**Highlight-keeping peers** (target 9.6): a property of the method, read off the simulated
+**Highlight-keeping peers** (the downstream target): a property of the method, read off the simulated
 scenes that have highlight pixels: the peers whose median share of highlight pixels kept over
 those scenes is >= 0.9. The same set is used on every scene, real renders included (where
 highlights are not known); the targets table names it.

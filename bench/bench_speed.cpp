@@ -12,7 +12,7 @@
 //   cold_over_warm   (cold cases) cold frame time / warm frame time, interleaved
 //   x_read_cpu, cold_over_warm_cpu  (1 thread) the same ratios in CPU time of the thread, which
 //                    a loaded machine disturbs less than wall time
-// The target_* cases time two frames interleaved and report issue 9's targets as ratios.
+// The target_* cases time two frames interleaved and report the rebuild's targets as ratios (a failed bucket, dense frames).
 // Quote medians of --benchmark_repetitions=3: the machines are shared and noisy.
 #include <benchmark/benchmark.h>
 
@@ -304,7 +304,7 @@ void frame_case(benchmark::State& st, std::string scene, int w, int h, mode m, u
 }
 
 // ---------------------------------------------------------------------------------------------
-// Issue 9's targets: two frames interleaved in one case, their ratio as a counter.
+// The rebuild's targets: two frames interleaved in one case, their ratio as a counter.
 
 // A failed bucket costs at most 2x the same frame without it.
 void target_failed_bucket(benchmark::State& st, int w, int h) {

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The command-line tool against oiiotool on a 2K sequence (issue 10, item 5).
+"""The command-line tool against oiiotool on a 2K sequence.
 
 Builds a sequence of two-half frames from a render with half buffers (default:
 ../shared/data/cycles-caustics, mirror-tiled to 2000x1080, each value's lowest mantissa bits

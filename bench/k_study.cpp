@@ -1,5 +1,5 @@
 // firefly_k_study: how the K-buffer result grows with K at a fixed total sample count, and
-// what each K costs a renderer in memory (issue 18, item 4; the tables are docs/k_study.md).
+// what each K costs a renderer in memory (the tables are docs/k_study.md).
 //
 //   firefly_k_study OUT.md [--size WxH] [--seeds N] [--totals T1,T2,...]
 //

@@ -1,4 +1,4 @@
-// Rebuilding from the other half (issue: reconstruction that never smears).
+// Rebuilding from the other half: reconstruction that never smears.
 #include <firefly/firefly.hpp>
 #include <firefly/sim/metrics.hpp>
 #include <firefly/sim/scene.hpp>

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Which per-pixel statistic finds fireflies at every brightness? (issues 15 and 17)
+"""Which per-pixel statistic finds fireflies at every brightness?
 
 Compares four local detection statistics on simulated half buffers with ground truth and on
 the shared real renders (../shared/data/cycles-*), with numpy only:

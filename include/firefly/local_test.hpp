@@ -1,4 +1,4 @@
-// firefly: the local, brightness-invariant firefly test (issues 15 and 17).
+// firefly: the local, brightness-invariant firefly test.
 //
 // Model. The two halves hold independent means of the same pixel's samples. Whatever the
 // per-sample law, a half mean L is positive and, to its first two moments, a gamma variable

@@ -34,7 +34,7 @@ inline scene null_scene(std::uint64_t seed, double shape, int spp, int width = 2
 }
 
 namespace detail {
-// The scenes the accuracy work asks for (issues 9, 15, 17), beyond the first eight.
+// The scenes for dense, interior and wide-range frames, beyond the first eight.
 inline bool named_accuracy_scene(const std::string& name, scene& s) {
     if (name == "dense10" || name == "dense30") {  // 10% / 30% of pixels hit per half
         s.effects = gradient | varying_noise | fireflies;
