@@ -95,12 +95,12 @@ std::size_t read_options(const py::kwargs& kw, O& o, List&& list) {
     return used;
 }
 
-// TypeError for the first keyword of kw that `list` does not name (nor `extra`).
+// TypeError for the first keyword of kw that `list` does not name (nor `extra`, if any).
 template <class List>
-void refuse_unknown(const py::kwargs& kw, List&& list, const char* cls, const char* extra = "") {
+void refuse_unknown(const py::kwargs& kw, List&& list, const char* cls, const char* extra = nullptr) {
     for (const auto& item : kw) {
         const std::string key = item.first.cast<std::string>();
-        bool known = key == extra;
+        bool known = extra != nullptr && key == extra;
         list([&](const char* name, auto) { known |= key == name; });
         if (!known) throw py::type_error(std::string(cls) + " got an unexpected keyword argument '" + key + "'");
     }

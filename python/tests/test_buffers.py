@@ -219,6 +219,7 @@ def test_options_round_trip():
     (lambda c, v: firefly.BufferDetector(false_alarm=0.7), ValueError, "false_alarm must lie in"),
     (lambda c, v: firefly.BufferDetector(bogus=1), TypeError, "unexpected keyword argument 'bogus'"),
     (lambda c, v: firefly.BufferDetector(pair={"bogus": 1}), TypeError, "unexpected keyword argument 'bogus'"),
+    (lambda c, v: firefly.BufferDetector(pair={"": 1}), TypeError, "unexpected keyword argument ''"),
     (lambda c, v: firefly.BufferDetector(pair=3), TypeError, "pair must be a dict"),
     (lambda c, v: firefly.BufferDetector(pair={"alpha": 2.0}), ValueError, "alpha"),
     (lambda c, v: firefly.BufferDetector(threads=0), ValueError, "threads must be >= 1"),

@@ -163,6 +163,7 @@ def test_bad_option_value_is_a_value_error(options, match):
     ({"reconstruct": 1}, "reconstruct must be True or False"),
     ({"highlight_rule": 2}, "highlight_rule must be a string"),
     ({"kernelwidth": 5}, "unexpected keyword argument 'kernelwidth'"),
+    ({"": 5}, "unexpected keyword argument ''"),
 ])
 def test_bad_option_type_or_name_is_a_type_error(options, match):
     with pytest.raises(TypeError, match=match):
