@@ -141,6 +141,14 @@ py::dict options_to_dict(detector_options o) {
     return d;
 }
 
+// before + "name=repr(value)" + after for every keyword of an options dict (docs, repr).
+std::string keywords_text(const py::dict& options, const char* before, const char* after = "") {
+    std::string s;
+    for (auto item : options)
+        s += before + item.first.cast<std::string>() + "=" + py::repr(item.second).cast<std::string>() + after;
+    return s;
+}
+
 py::dict buffer_options_to_dict(cross_buffer_options o) {
     py::dict d;
     firefly_py::for_each_buffer_option([&](const char* name, auto get) { d[name] = option_to_python(get(o)); });
@@ -411,9 +419,7 @@ std::string detector_doc() {
         "Finds and removes fireflies using the two half buffers of a frame. Keep one per stream of\n"
         "frames: it caches Student-t points and scratch memory across frames. threads: up to this\n"
         "many threads per frame (the two halves run in parallel). Options (keyword: default):\n";
-    const detector_options o;
-    for (auto item : options_to_dict(o)) s += "  " + item.first.cast<std::string>() + "=" + py::repr(item.second).cast<std::string>() + "\n";
-    return s;
+    return s + keywords_text(options_to_dict(detector_options{}), "  ", "\n");
 }
 
 const char* process_doc =
@@ -456,11 +462,8 @@ py::class_<PyDet> detector_class(py::module_& m, const char* name, const std::st
         .def_property_readonly("options", [to_dict](const PyDet& d) { return to_dict(d.det.options()); }, options_doc)
         .def_property_readonly("threads", [](const PyDet& d) { return d.threads; })
         .def("__repr__", [name, to_dict](const PyDet& d) {
-            std::string s = std::string(name) + "(threads=" + std::to_string(d.threads);
-            const py::dict options = to_dict(d.det.options());
-            for (auto item : options)
-                s += ", " + item.first.cast<std::string>() + "=" + py::repr(item.second).cast<std::string>();
-            return s + ")";
+            return std::string(name) + "(threads=" + std::to_string(d.threads) +
+                   keywords_text(to_dict(d.det.options()), ", ") + ")";
         });
     return c;
 }
@@ -560,9 +563,7 @@ std::string buffer_detector_doc() {
         "the others at its own pixel and rebuilt from their mean. K = 2 is the two-half Detector\n"
         "(variance needed; its options: pair={...}). Keep one per stream of frames. Options\n"
         "(keyword: default):\n";
-    for (auto item : buffer_options_to_dict(cross_buffer_options{}))
-        s += "  " + item.first.cast<std::string>() + "=" + py::repr(item.second).cast<std::string>() + "\n";
-    return s;
+    return s + keywords_text(buffer_options_to_dict(cross_buffer_options{}), "  ", "\n");
 }
 
 const char* buffer_process_doc =
