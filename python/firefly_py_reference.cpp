@@ -84,23 +84,13 @@ bool set_listed(O& o, const std::string& name, const char* value, List&& list) {
 constexpr auto detector_option_list = [](auto&& f) { firefly_py::for_each_option(f); };
 constexpr auto buffer_option_list = [](auto&& f) { firefly_py::for_each_buffer_option(f); };
 
-// "name=value" into the options; false when the name or value is unknown.
-bool set_option(detector_options& o, const std::string& arg, int& threads) {
-    const std::size_t eq = arg.find('=');
-    if (eq == std::string::npos) return false;
-    const std::string name = arg.substr(0, eq);
-    const char* value = arg.c_str() + eq + 1;
-    if (name == "threads") return parse_value(value, threads);
+// An option into the options; false when its name or value is unknown.
+bool set_option(detector_options& o, const std::string& name, const char* value) {
     return set_listed(o, name, value, detector_option_list);
 }
 
-// The same for K buffers: "pair.NAME=value" sets Detector's option NAME (K = 2).
-bool set_buffer_option(firefly::cross_buffer_options& o, const std::string& arg, int& threads) {
-    const std::size_t eq = arg.find('=');
-    if (eq == std::string::npos) return false;
-    const std::string name = arg.substr(0, eq);
-    const char* value = arg.c_str() + eq + 1;
-    if (name == "threads") return parse_value(value, threads);
+// The same for K buffers: "pair.NAME" is Detector's option NAME (K = 2).
+bool set_buffer_option(firefly::cross_buffer_options& o, const std::string& name, const char* value) {
     if (name.rfind("pair.", 0) == 0) return set_listed(o.pair, name.substr(5), value, detector_option_list);
     return set_listed(o, name, value, buffer_option_list);
 }
@@ -161,13 +151,19 @@ int run(const frame_spec& s, const detector_options& o, int threads) {
     return 0;
 }
 
-// The options from argv[first ..] (set(o, arg, threads)), then run(T{}, o, threads) with T
-// float or double as dtype says.
+// The "name=value" options from argv[first ..] (threads=N, or set(o, name, value)), then
+// run(T{}, o, threads) with T float or double as dtype says.
 template <class O, class Set, class Run>
 int run_with(int argc, char** argv, int first, const std::string& dtype, O o, Set&& set, Run&& run) {
     int threads = 1;
-    for (int i = first; i < argc; ++i)
-        if (!set(o, argv[i], threads)) return std::fprintf(stderr, "bad option: %s\n", argv[i]), 2;
+    for (int i = first; i < argc; ++i) {
+        const std::string arg = argv[i];
+        const std::size_t eq = arg.find('=');
+        const std::string name = arg.substr(0, eq);
+        const char* value = argv[i] + (eq == std::string::npos ? arg.size() : eq + 1);
+        const bool ok = eq != std::string::npos && (name == "threads" ? parse_value(value, threads) : set(o, name, value));
+        if (!ok) return std::fprintf(stderr, "bad option: %s\n", argv[i]), 2;
+    }
     if (dtype == "f4") return run(float{}, o, threads);
     if (dtype == "f8") return run(double{}, o, threads);
     std::fprintf(stderr, "dtype must be f4 or f8\n");
