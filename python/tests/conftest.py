@@ -60,20 +60,35 @@ def arrays_of(frame):
     return {k: frame[k] for k in ARRAYS if k in frame}
 
 
-def run_reference(tmp_path, frame, threads=1, **options):
-    """Cleans the frame with the C++ library; returns (arrays, masks, report as text dict)."""
+def reference_exe():
+    """The reference program (firefly_py_reference), or a skip outside ctest."""
     exe = os.environ.get("FIREFLY_PY_REFERENCE")
     if not exe:
         pytest.skip("FIREFLY_PY_REFERENCE is not set (run the tests through ctest)")
+    return exe
+
+
+def dtype_code(dtype):
+    """The reference program's name for a dtype."""
+    return {np.dtype(np.float32): "f4", np.dtype(np.float64): "f8"}[np.dtype(dtype)]
+
+
+def option_arg(name, value):
+    """An option as the reference program reads it: name=value (repr() but for strings)."""
+    return "%s=%s" % (name, value if isinstance(value, str) else repr(value))
+
+
+def run_reference(tmp_path, frame, threads=1, **options):
+    """Cleans the frame with the C++ library; returns (arrays, masks, report as text dict)."""
+    exe = reference_exe()
     arrays = arrays_of(frame)
     for name, arr in arrays.items():
         np.ascontiguousarray(arr).tofile(tmp_path / name)
     color = arrays["a_color"]
     h, w, nc = color.shape
     nv = arrays["a_variance"].shape[2] if arrays["a_variance"].ndim == 3 else 1
-    dtype = {np.dtype(np.float32): "f4", np.dtype(np.float64): "f8"}[color.dtype]
-    args = [exe, dtype, str(w), str(h), str(nc), str(nv), str(tmp_path), "threads=%d" % threads]
-    args += ["%s=%r" % (k, v) if not isinstance(v, str) else "%s=%s" % (k, v) for k, v in options.items()]
+    args = [exe, dtype_code(color.dtype), str(w), str(h), str(nc), str(nv), str(tmp_path), "threads=%d" % threads]
+    args += [option_arg(k, v) for k, v in options.items()]
     done = subprocess.run(args, capture_output=True, text=True, check=True)
     out = {name: np.fromfile(tmp_path / name, dtype=color.dtype).reshape(arr.shape)
            for name, arr in arrays.items()}

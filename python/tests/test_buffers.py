@@ -1,13 +1,12 @@
 """K buffers (BufferDetector): the C++ library's bytes through the module, K = 2 as the two-half
 Detector, pixels left where more than half of the buffers are NaN, and errors as exceptions."""
-import os
 import subprocess
 
 import numpy as np
 import pytest
 
 import firefly
-from conftest import assert_gil_released, report_as_text, same_bits
+from conftest import assert_gil_released, dtype_code, option_arg, reference_exe, report_as_text, same_bits
 
 
 def make_buffers(k=4, seed=3, height=40, width=56, color_channels=3, variance_channels=3, dtype=np.float32):
@@ -57,22 +56,20 @@ def buffer_report_as_text(rep):
 
 
 def run_reference_buffers(tmp_path, colors, variances, threads=1, **options):
-    exe = os.environ.get("FIREFLY_PY_REFERENCE")
-    if not exe:
-        pytest.skip("FIREFLY_PY_REFERENCE is not set (run the tests through ctest)")
+    exe = reference_exe()
     h, w, nc = colors[0].shape
     nv = 0 if variances is None else variances[0].shape[2]
     for i, c in enumerate(colors):
         np.ascontiguousarray(c).tofile(tmp_path / ("color_%d" % i))
         if variances is not None:
             np.ascontiguousarray(variances[i]).tofile(tmp_path / ("variance_%d" % i))
-    dtype = {np.dtype(np.float32): "f4", np.dtype(np.float64): "f8"}[colors[0].dtype]
-    args = [exe, "buffers", str(len(colors)), dtype, str(w), str(h), str(nc), str(nv), str(tmp_path), "threads=%d" % threads]
+    args = [exe, "buffers", str(len(colors)), dtype_code(colors[0].dtype), str(w), str(h), str(nc), str(nv),
+            str(tmp_path), "threads=%d" % threads]
     for key, v in options.items():
         if key == "pair":
-            args += ["pair.%s=%s" % (k, x if isinstance(x, str) else repr(x)) for k, x in v.items()]
+            args += [option_arg("pair." + k, x) for k, x in v.items()]
         else:
-            args.append("%s=%s" % (key, v if isinstance(v, str) else repr(v)))
+            args.append(option_arg(key, v))
     done = subprocess.run(args, capture_output=True, text=True, check=True)
     read = lambda name, like: np.fromfile(tmp_path / name, dtype=like.dtype).reshape(like.shape)
     out_c = [read("color_%d" % i, c) for i, c in enumerate(colors)]

@@ -15,13 +15,16 @@ from conftest import make_frame, same_bits
 NAMES = ["R", "G", "B", "Variance.R", "Variance.G", "Variance.B"]
 
 
-def readme_examples():
+def python_section():
     path = os.environ.get("FIREFLY_README")
     if not path:
         pytest.skip("FIREFLY_README is not set (run the tests through ctest)")
     text = open(path, encoding="utf-8").read()
-    section = text.split("\n## Python\n", 1)[1].split("\n## ", 1)[0]
-    return re.findall(r"```python\n(.*?)```", section, re.S)
+    return text.split("\n## Python\n", 1)[1].split("\n## ", 1)[0]
+
+
+def readme_examples():
+    return re.findall(r"```python\n(.*?)```", python_section(), re.S)
 
 
 def readme_example():
@@ -106,11 +109,7 @@ def test_install_puts_an_importable_module_under_the_prefix(tmp_path):
 
 
 def test_readme_lists_every_option():
-    path = os.environ.get("FIREFLY_README")
-    if not path:
-        pytest.skip("FIREFLY_README is not set (run the tests through ctest)")
-    text = open(path, encoding="utf-8").read()
-    section = text.split("\n## Python\n", 1)[1].split("\n## ", 1)[0]
+    section = python_section()
     listed = re.search(r"flattened \((.*?)\), enums", section, re.S).group(1)
     assert set(re.findall(r"`(\w+)`", listed)) == set(firefly.Detector().options)
     listed = re.search(r"member is a\s+keyword \((.*?)\), and `pair`", section, re.S).group(1)
