@@ -210,11 +210,11 @@ inline void add_io_options(CLI::App& app, options& c, raw_args& r) {
                    "also write the cleaned buffers: PREFIX_a.exr and PREFIX_b.exr (two halves), PREFIX_0.exr ... "
                    "(--buffers, --renders)")->type_name("PREFIX")->group("outputs");
     app.add_option("--masks", c.masks,
-                   "also write masks, named as --halves: channels firefly, highlight, consistent, nonfinite, energy "
-                   "(0 or 1) for two buffers; firefly, nonfinite for 3 or more")->type_name("PREFIX")
+                   "also write masks, named as --halves: channels firefly, highlight, consistent, nonfinite, energy, "
+                   "dropped (0 or 1) for two buffers; firefly, nonfinite, dropped for 3 or more")->type_name("PREFIX")
         ->group("outputs");
     app.add_option("--report", c.report,
-                   "JSON report: options, per-frame counts (buffers, pixels, tested, fireflies, nonfinite, left, "
+                   "JSON report: options, per-frame counts (buffers, pixels, tested, fireflies, nonfinite, dropped, left, "
                    "per_buffer; two halves also per half), timings and errors")->type_name("FILE")->group("outputs");
     app.add_option("--preview", c.preview,
                    "PNG previews PREFIX_before.png (mean of the inputs), PREFIX_after.png (the output), sRGB")->type_name("PREFIX")->group("outputs");
@@ -235,6 +235,10 @@ inline void add_detector_options(CLI::App& app, options& c) {
     app.add_flag_callback("--no-energy-return", [&c] { c.o.return_energy = c.x.return_energy = false; },
                           "remove fireflies only: do not give back the energy of fireflies that fell densely "
                           "(firefly/energy.hpp)")
+        ->group("detector (every mode)");
+    app.add_flag_callback("--keep-black", [&c] { c.o.find_dropped = c.x.find_dropped = false; },
+                          "leave pixels black in one buffer as they are, even where the others show they "
+                          "cannot be black by chance (a bucket or render written black; firefly/dropped.hpp)")
         ->group("detector (every mode)");
     app.add_option_function<double>("--energy-sigma", [&c](double v) { c.o.energy_sigma = c.x.energy_sigma = v; },
                                     "width in pixels of the energy return's Gaussian")

@@ -335,13 +335,13 @@ image combine(const options& c, const std::vector<buffer_data>& h) {
     return comb;
 }
 
-// A mask file, one 0/1 channel per bit: firefly::detector's five for two buffers, the
-// K-buffer detector's two (firefly, nonfinite) for more.
+// A mask file, one 0/1 channel per bit: firefly::detector's six for two buffers, the
+// K-buffer detector's three (firefly, nonfinite, dropped) for more.
 image mask_image(const std::vector<std::uint8_t>& mask, const image& like, bool pair) {
-    static const char* const names[5] = {"firefly", "highlight", "consistent", "nonfinite", "energy"};
-    static const std::uint8_t bits[5] = {mask_bits::firefly, mask_bits::highlight, mask_bits::consistent,
-                                         mask_bits::nonfinite, mask_bits::energy};
-    const std::vector<std::size_t> used = pair ? std::vector<std::size_t>{0, 1, 2, 3, 4} : std::vector<std::size_t>{0, 3};
+    static const char* const names[6] = {"firefly", "highlight", "consistent", "nonfinite", "energy", "dropped"};
+    static const std::uint8_t bits[6] = {mask_bits::firefly, mask_bits::highlight, mask_bits::consistent,
+                                         mask_bits::nonfinite, mask_bits::energy, mask_bits::dropped};
+    const std::vector<std::size_t> used = pair ? std::vector<std::size_t>{0, 1, 2, 3, 4, 5} : std::vector<std::size_t>{0, 3, 5};
     image m;
     m.width = like.width;
     m.height = like.height;
@@ -382,6 +382,7 @@ std::string write_png_to(firefly_tools::output_set& set, const std::string& path
 json half_json(const half_report& h) {
     return json{{"pixels", h.pixels},       {"valid", h.valid},
                 {"ignored", h.ignored},     {"nonfinite", h.nonfinite},
+                {"dropped", h.dropped},
                 {"negative_variance", h.negative_variance},
                 {"median_sd", h.median},    {"mad_sd", h.mad},
                 {"bound", h.bound},         {"outliers", h.outliers},
@@ -398,6 +399,7 @@ void put_counts(json& rec, const cross_buffer_report& r) {
     rec["tested"] = r.tested;
     rec["fireflies"] = r.fireflies;
     rec["nonfinite"] = r.nonfinite;
+    rec["dropped"] = r.dropped;
     rec["left"] = r.left;
     rec["per_buffer"] = r.per_buffer;
     rec["energy_removed"] = r.energy_removed;
@@ -413,8 +415,9 @@ cross_buffer_report pair_counts(const frame_report& r) {
     for (const half_report& h : r.half) {
         c.fireflies += h.fireflies;
         c.nonfinite += h.nonfinite;
+        c.dropped += h.dropped;
         c.left += h.unreachable;
-        c.per_buffer.push_back(h.fireflies + h.nonfinite);
+        c.per_buffer.push_back(h.fireflies + h.nonfinite + h.dropped);
         c.energy_removed += h.energy_removed;
         c.energy_returned += h.energy_returned;
     }
@@ -617,6 +620,7 @@ json options_json(const options& c) {
         j["use_variance"] = c.x.use_variance;
         j["refine_noise"] = c.x.refine_noise;
         j["return_energy"] = c.x.return_energy;
+        j["find_dropped"] = c.x.find_dropped;
         j["energy_sigma"] = c.x.energy_sigma;
         j["energy_coarse_sigma"] = c.x.energy_coarse_sigma;
         j["threads"] = c.threads;
@@ -637,6 +641,7 @@ json options_json(const options& c) {
                   {"tolerance", o.reconstruction.tolerance},
                   {"iterations", o.reconstruction.max_iterations},
                   {"return_energy", o.return_energy},
+                  {"find_dropped", o.find_dropped},
                   {"energy_sigma", o.energy_sigma},
                   {"energy_coarse_sigma", o.energy_coarse_sigma},
                   {"threads", c.threads}});

@@ -613,6 +613,7 @@ PYBIND11_MODULE(firefly, m) {
     m.attr("MASK_OTHER_HALF") = firefly::mask_bits::other_half;
     m.attr("MASK_ENERGY") = firefly::mask_bits::energy;
     m.attr("MASK_LEFT") = firefly::mask_bits::left;
+    m.attr("MASK_DROPPED") = firefly::mask_bits::dropped;
     bind_reports(m);
     bind_detector(m);
     bind_buffer_detector(m);

@@ -102,6 +102,7 @@ constexpr void for_each_option(F&& f) {
     f("rebuild", [](O& o) -> auto& { return o.rebuild; });
     f("blend_spatial", [](O& o) -> auto& { return o.blend_spatial; });
     f("reconstruct", [](O& o) -> auto& { return o.reconstruct; });
+    f("find_dropped", [](O& o) -> auto& { return o.find_dropped; });
     f("return_energy", [](O& o) -> auto& { return o.return_energy; });
     f("energy_sigma", [](O& o) -> auto& { return o.energy_sigma; });
     f("energy_coarse_sigma", [](O& o) -> auto& { return o.energy_coarse_sigma; });
@@ -122,6 +123,7 @@ constexpr void for_each_half_field(F&& f) {
     f("valid", &H::valid);
     f("ignored", &H::ignored);
     f("nonfinite", &H::nonfinite);
+    f("dropped", &H::dropped);
     f("negative_variance", &H::negative_variance);
     f("median", &H::median);
     f("mad", &H::mad);
@@ -166,6 +168,7 @@ constexpr void for_each_buffer_option(F&& f) {
     f("false_alarm", [](O& o) -> auto& { return o.false_alarm; });
     f("use_variance", [](O& o) -> auto& { return o.use_variance; });
     f("reconstruct", [](O& o) -> auto& { return o.reconstruct; });
+    f("find_dropped", [](O& o) -> auto& { return o.find_dropped; });
     f("refine_noise", [](O& o) -> auto& { return o.refine_noise; });
     f("radius", [](O& o) -> auto& { return o.radius; });
     f("return_energy", [](O& o) -> auto& { return o.return_energy; });
@@ -186,6 +189,7 @@ constexpr void for_each_buffer_field(F&& f) {
     f("level", &R::level);
     f("fireflies", &R::fireflies);
     f("nonfinite", &R::nonfinite);
+    f("dropped", &R::dropped);
     f("left", &R::left);
     f("energy_removed", &R::energy_removed);
     f("energy_returned", &R::energy_returned);

@@ -166,7 +166,7 @@ namespace {
 constexpr std::uint32_t all_effects =
     sim::gradient | sim::fine_detail | sim::varying_noise | sim::fireflies | sim::highlights |
     sim::wide_highlight | sim::black_background | sim::alpha_coverage | sim::nonfinite | sim::negative |
-    sim::log_gradient | sim::caustics | sim::failed_bucket | sim::bright_region;
+    sim::log_gradient | sim::caustics | sim::failed_bucket | sim::bright_region | sim::dropped_bucket;
 
 bool same_bits(const float* a, const float* b, std::size_t n) { return std::memcmp(a, b, n * sizeof(float)) == 0; }
 
@@ -232,11 +232,14 @@ TEST_CASE("every effect leaves the pixels outside its footprint bit-identical", 
         for (const bool relative : {false, true}) {
             s.firefly_relative = relative;
             s.firefly_energy = relative ? 5.0 : 400.0;
-            for (int bit = 0; bit < 14; ++bit) {
+            for (int bit = 0; bit < 15; ++bit) {
                 const sim::effect e = static_cast<sim::effect>(1u << bit);
-                // Coverage is one effect seen twice: either of the pair masks the background.
+                // Coverage is one effect seen twice: either of the pair masks the background;
+                // the failed and the dropped bucket are one square (NaN or black).
                 const std::uint32_t pair = e == sim::black_background ? sim::alpha_coverage
                                            : e == sim::alpha_coverage ? sim::black_background
+                                           : e == sim::failed_bucket  ? sim::dropped_bucket
+                                           : e == sim::dropped_bucket ? sim::failed_bucket
                                                                       : 0u;
                 s.effects = all_effects & ~static_cast<std::uint32_t>(e) & ~pair;
                 check_independence(s, e, 2);
@@ -366,6 +369,21 @@ TEST_CASE("failed bucket: a NaN square in half A only", "[sim][scenes]") {
     CHECK(bad[0] == 32u * 32u);  // 1/8 of the width, square
     CHECK(bad[1] == 0);
     CHECK(nonfinite_expected == 0);
+}
+
+TEST_CASE("dropped bucket: a black square in half A only", "[sim][scenes]") {
+    const sim::frame f = sim::simulate(sim::named_scene("dropped_bucket", 256, 192, 6));
+    std::size_t black[2] = {0, 0}, nonfinite = 0;
+    for (std::size_t i = 0; i < f.pixels(); ++i)
+        for (int h = 0; h < 2; ++h) {
+            bool zero = true;
+            for (std::size_t c = 0; c < 3; ++c) zero = zero && f.color[h][i * 3 + c] == 0 && f.variance[h][i * 3 + c] == 0;
+            black[h] += zero;
+            nonfinite += !std::isfinite(f.color[h][i * 3]);
+        }
+    CHECK(black[0] == 32u * 32u);  // the failed bucket's square
+    CHECK(black[1] == 0);
+    CHECK(nonfinite == 0);
 }
 
 TEST_CASE("interior: dark, noisy everywhere, moderate dense fireflies, a bright ceiling", "[sim][scenes]") {

@@ -81,6 +81,9 @@
 //       agree on it, the same amount to every buffer (energy.hpp).
 //   "NaN/Inf in a half are repaired"                   -> a buffer with NaN/Inf in colour or
 //       variance at a pixel is left out of the test and rebuilt like a firefly.
+//   "black pixels are ignored"                         -> unless one buffer alone is black where
+//       the others show it cannot be by chance (dropped.hpp, find_dropped): then it is left out
+//       of the test and rebuilt like a non-finite one (mask_bits::dropped, report.dropped).
 //   "bad in both halves: spatial reconstruction"       -> a pixel with more than floor(K / 2)
 //       non-finite buffers is left as it is and counted (report.left, error no_valid_pixels);
 //       its non-finite buffers' masks say nonfinite | left (found, not repaired), the others 0.
@@ -106,6 +109,7 @@
 #include <memory>
 #include <vector>
 
+#include "dropped.hpp"
 #include "energy.hpp"
 #include "fdr.hpp"
 #include "image_view.hpp"
@@ -136,6 +140,9 @@ struct cross_buffer_options {
                                  // spread of the buffer means (K = 3 always uses them); the
                                  // spread measured better at 8-16 samples per buffer
     bool reconstruct = true;     // false: detect and report only
+    bool find_dropped = true;    // a buffer black where the others show it cannot be by chance
+                                 // (a failed bucket or render written black, dropped.hpp) is
+                                 // left out of the test and rebuilt as a non-finite one
     bool refine_noise = true;    // neighbours flagged at the cap pool their noise without their flagged buffers
     int radius = 1;              // the noise is pooled over (2 radius + 1)^2 pixels (0 to 8)
     bool return_energy = true;   // K >= 3, 3 or 4 channels: the removed fireflies' energy is
@@ -167,10 +174,12 @@ struct [[nodiscard]] cross_buffer_report {
     double level = 0;            // the per-pixel level the frame's decision ran at (fdr.hpp)
     std::size_t fireflies = 0;   // pixel-buffers flagged as fireflies (rebuilt if reconstruct)
     std::size_t nonfinite = 0;   // pixel-buffers with NaN/Inf, rebuilt from the others
+    std::size_t dropped = 0;     // pixel-buffers black where the others show they cannot be
+                                 // (find_dropped), rebuilt from the others
     std::size_t left = 0;        // pixels with more than K / 2 non-finite buffers, unchanged
                                  // (K = 2: those no usable value reached, the pair detector's
                                  // unreachable; its counts above are what it found)
-    std::vector<std::size_t> per_buffer;  // fireflies and non-finite, per buffer
+    std::vector<std::size_t> per_buffer;  // fireflies, non-finite and dropped, per buffer
     double energy_removed = 0;   // sum over pixels of the mean colour the fireflies took from
     double energy_returned = 0;  // the frame's mean image, and of what energy.hpp gave back
     frame_report pair{};         // K = 2: firefly::detector's report
@@ -367,6 +376,8 @@ public:
     std::size_t scratch_bytes() const noexcept {
         return (noise_.capacity() + log_p_.capacity() + excess_.capacity()) *
                    sizeof(double) + level_.capacity() * sizeof(float) + refined_.capacity() +
+               lone_.capacity() + dropped_at_.capacity() + dropped_scratch_.bytes() +
+               dropped_found_.capacity() * sizeof(dropped_pixel) +
                energy_.bytes() + pair_.scratch_bytes();
     }
 
@@ -464,6 +475,7 @@ private:
         level_.resize(rep.pixels);
         if (returns_energy(b, k, clean)) excess_.assign(rep.pixels * 3, 0.0);
         else excess_.clear();
+        find_dropped_buffers(b, k, has_var);
         exec_.run(static_cast<std::size_t>(h), [&](std::size_t y) {
             noise_row(b, k, has_var, with_var, static_cast<int>(y));
         });
@@ -489,6 +501,7 @@ private:
             rep.candidates += c.found.size();
             rep.fireflies += c.fireflies;
             rep.nonfinite += c.nonfinite;
+            rep.dropped += c.dropped;
             rep.left += c.left;
             for (int i = 0; i < k; ++i) rep.per_buffer[static_cast<std::size_t>(i)] += c.per_buffer[static_cast<std::size_t>(i)];
         }
@@ -533,7 +546,7 @@ private:
     };
     struct row_counts {
         explicit row_counts(int k) : per_buffer(static_cast<std::size_t>(k), 0) {}
-        std::size_t tested = 0, fireflies = 0, nonfinite = 0, left = 0;
+        std::size_t tested = 0, fireflies = 0, nonfinite = 0, dropped = 0, left = 0;
         std::vector<std::size_t> per_buffer;
         std::vector<candidate> found;
     };
@@ -584,11 +597,57 @@ private:
         });
     }
 
-    // The K buffers of pixel (x, y), read and sorted.
+    // The K buffers of pixel (x, y), read and sorted; a dropped buffer counts as non-finite.
     template <class C, class V>
-    static void gather(const buffer_view<C, V>* b, int k, int x, int y, bool has_var, detail::pixel_buffers& p) {
+    void gather(const buffer_view<C, V>* b, int k, int x, int y, bool has_var, detail::pixel_buffers& p) const {
         for (int i = 0; i < k; ++i) read_buffer(b[i], x, y, has_var, i, p);
+        const int d = dropped_buffer(x, y, b[0].color.width());
+        if (d >= 0) p.finite[static_cast<std::size_t>(d)] = false, p.flagged[static_cast<std::size_t>(d)] = true;
         sort_buffers(b, x, y, p);
+    }
+
+    // The buffer found dropped at (x, y), or -1.
+    int dropped_buffer(int x, int y, int w) const noexcept {
+        return dropped_at_.empty() ? -1 : static_cast<int>(dropped_at_[index(x, y, w)]) - 1;
+    }
+
+    // find_dropped (dropped.hpp): a lone black is a pixel where exactly one buffer is black
+    // (its colour channels 0) and every other one finite and not black; those the window test
+    // finds are marked in dropped_at_ (empty: none).
+    template <class C, class V>
+    void find_dropped_buffers(const buffer_view<C, V>* b, int k, bool has_var) {
+        dropped_at_.clear();
+        if (!options_.find_dropped) return;
+        const int w = b[0].color.width(), h = b[0].color.height();
+        lone_.assign(static_cast<std::size_t>(w) * static_cast<std::size_t>(h), 0);
+        std::vector<std::uint8_t> any(static_cast<std::size_t>(h), 0);
+        exec_.run(static_cast<std::size_t>(h), [&](std::size_t yy) {
+            const int y = static_cast<int>(yy);
+            detail::pixel_buffers p;
+            for (int x = 0; x < w; ++x) {
+                int black = -1, blacks = 0;
+                bool usable = true;
+                for (int i = 0; i < k && usable && blacks < 2; ++i) {
+                    read_buffer(b[i], x, y, has_var, i, p);
+                    usable = p.finite[static_cast<std::size_t>(i)];
+                    if (usable && p.level[static_cast<std::size_t>(i)] == 0 && is_black(b[i].color, x, y))
+                        black = i, ++blacks;
+                }
+                if (usable && blacks == 1) lone_[index(x, y, w)] = static_cast<std::uint8_t>(black + 1), any[yy] = 1;
+            }
+        });
+        if (std::find(any.begin(), any.end(), 1) == any.end()) return;
+        (void)find_dropped(lone_.data(), w, h, k, options_.alpha, dropped_scratch_, exec_, dropped_found_);
+        if (dropped_found_.empty()) return;
+        dropped_at_.assign(lone_.size(), 0);
+        for (const dropped_pixel& d : dropped_found_) dropped_at_[d.pixel] = static_cast<std::uint8_t>(d.buffer + 1);
+    }
+
+    template <class C>
+    static bool is_black(const image_view<C>& color, int x, int y) {
+        for (int c = 0; c < colour_channels(color.channels()); ++c)
+            if (color.load(x, y, c) != 0) return false;
+        return true;
     }
 
     // Pass 1: every pixel's own noise and level (before anything is rebuilt; NaN where they
@@ -781,8 +840,10 @@ private:
             const bool kept = f.log_p < 0 && f.log_p <= frame_log_p_;
             const pooled pn = kept ? pooled_noise(x, y, w, b[0].color.height(), k, with_var, own_rest(p, with_var)) : pooled{};
             const int flags = kept ? detail::judge_pixel(p, pn.noise, with_var, frame_.at(pn.n)) : 0;
+            const bool dropped = dropped_buffer(x, y, w) >= 0;
             rc.fireflies += static_cast<std::size_t>(flags);
-            rc.nonfinite += static_cast<std::size_t>(bad);
+            rc.nonfinite += static_cast<std::size_t>(bad - (dropped ? 1 : 0));
+            rc.dropped += dropped ? 1 : 0;
             for (int i = 0; i < k; ++i) rc.per_buffer[static_cast<std::size_t>(i)] += p.flagged[static_cast<std::size_t>(i)];
             write_masks(masks, p, x, y);
             if (clean && (flags > 0 || bad > 0)) rebuild(b, p, x, y, has_var, excess_.empty() ? nullptr : &excess_[index(x, y, w) * 3]);
@@ -796,11 +857,15 @@ private:
             masks[i](x, y) = p.finite[static_cast<std::size_t>(i)] ? std::uint8_t{0} : found_left;
     }
 
-    static void write_masks(const image_view<std::uint8_t>* masks, const detail::pixel_buffers& p, int x, int y) {
+    void write_masks(const image_view<std::uint8_t>* masks, const detail::pixel_buffers& p, int x, int y) const {
         if (!masks) return;
+        const int d = dropped_buffer(x, y, masks[0].width());
         for (int i = 0; i < p.k; ++i) {
             const std::size_t s = static_cast<std::size_t>(i);
-            masks[i](x, y) = !p.flagged[s] ? 0 : p.finite[s] ? mask_bits::firefly : mask_bits::nonfinite;
+            masks[i](x, y) = !p.flagged[s] ? 0
+                             : p.finite[s] ? mask_bits::firefly
+                             : i == d      ? mask_bits::dropped
+                                           : mask_bits::nonfinite;
         }
     }
 
@@ -904,6 +969,10 @@ private:
     std::vector<float> level_;   // per pixel: lower_level, its buffers' lower half (NaN: none usable)
     std::vector<std::uint8_t> refined_;  // per pixel: its noise pooled without the buffers flagged at the cap
     std::vector<double> excess_;        // energy return: what was removed, 3 channels per pixel
+    std::vector<std::uint8_t> lone_;        // find_dropped: 1 + the buffer black alone at a pixel, or 0
+    std::vector<std::uint8_t> dropped_at_;  // 1 + the buffer found dropped at a pixel, or 0 (empty: none)
+    dropped_scratch dropped_scratch_;
+    std::vector<dropped_pixel> dropped_found_;
 
     energy_scratch energy_;
 };

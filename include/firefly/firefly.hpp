@@ -16,6 +16,7 @@
 #include "kernel.hpp"
 #include "reconstruct.hpp"
 #include "cross_half.hpp"
+#include "dropped.hpp"
 #include "parallel.hpp"
 #include "pipeline.hpp"
 #include "buffers.hpp"

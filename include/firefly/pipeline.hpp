@@ -34,6 +34,7 @@
 
 #include "bound.hpp"
 #include "cross_half.hpp"
+#include "dropped.hpp"
 #include "energy.hpp"
 #include "esd.hpp"
 #include "fdr.hpp"
@@ -84,6 +85,9 @@ struct detector_options {
     bool blend_spatial = true;          // other_half: blend in the spatial estimate (false:
                                         // the other half's value alone)
     bool reconstruct = true;            // false: detect and report only, change nothing
+    bool find_dropped = true;           // pixels black in one half where the other half shows
+                                        // they cannot be (a failed bucket written black,
+                                        // dropped.hpp) are rebuilt as non-finite ones are
     bool return_energy = true;          // give back the rebuilt fireflies' energy where many
                                         // agree on it (energy.hpp; adds light to pixels near
                                         // dense fireflies, never lowers any; false: the
@@ -128,10 +132,13 @@ inline constexpr std::uint8_t other_half = 16;// rebuilt from the other half's v
                                               // are correlated here
 inline constexpr std::uint8_t energy = 32;    // light added by the energy return (energy.hpp):
                                               // the removed fireflies' energy given back
-inline constexpr std::uint8_t left = 64;      // with firefly or nonfinite: to be rebuilt, but
+inline constexpr std::uint8_t left = 64;      // with firefly, nonfinite or dropped: to be rebuilt, but
                                               // no usable value reached it (process() only;
                                               // report.unreachable, no_valid_pixels; K buffers:
                                               // report.left): it keeps its input values
+inline constexpr std::uint8_t dropped = 128;  // black here where the other half shows it
+                                              // cannot be by chance (dropped.hpp): rebuilt as
+                                              // a non-finite pixel (unless left)
 }  // namespace mask_bits
 
 struct half_report {
@@ -139,6 +146,8 @@ struct half_report {
     std::size_t valid = 0;              // pixels in the statistics
     std::size_t ignored = 0;            // black or alpha <= 0
     std::size_t nonfinite = 0;          // NaN/Inf in colour, variance or alpha
+    std::size_t dropped = 0;            // black where the other half shows it cannot be by
+                                        // chance (find_dropped; not counted in ignored)
     std::size_t negative_variance = 0;  // pixels with a negative variance (taken as 0)
     double median = 0.0;                // of the standard deviations
     double mad = 0.0;
@@ -151,7 +160,7 @@ struct half_report {
                                         // within their neighbourhood's noise)
     std::size_t frame_kept = 0;         // one-half outliers the frame's decision kept (fdr.hpp)
     std::size_t fireflies = 0;          // outliers to rebuild (rebuilt unless reconstruct = false)
-    std::size_t repaired = 0;           // non-finite pixels rebuilt
+    std::size_t repaired = 0;           // non-finite and dropped pixels rebuilt
     std::size_t from_other_half = 0;    // of the rebuilt pixels, those taken from the other half
     std::size_t unreachable = 0;        // pixels to rebuild that no usable source could reach
     int phase1_rounds = 0;
@@ -219,13 +228,14 @@ public:
                         (pair_log_p_.capacity() + pair_level_log_p_.capacity() + pair_base_.capacity() +
                          pair_family_.capacity()) * sizeof(double) +
                         (visit_.capacity() + visit_tmp_.capacity()) * sizeof(std::uint64_t) +
-                        frame_log_p_.capacity() * sizeof(double) + spots_.capacity() * sizeof(strict_pair);
+                        frame_log_p_.capacity() * sizeof(double) + spots_.capacity() * sizeof(strict_pair) +
+                        lone_.capacity() + dropped_scratch_.bytes() + dropped_found_.capacity() * sizeof(dropped_pixel);
         for (const auto& h : halves_)
             n += h.sd.capacity() * sizeof(float) + h.label.capacity() +
                  h.hist.bytes() + h.select_f.capacity() * sizeof(float) +
                  h.select.capacity() * sizeof(double) + h.order.capacity() * sizeof(std::uint32_t) +
                  h.removed.capacity() * sizeof(double) + (h.keys.capacity() + h.keys_tmp.capacity()) * sizeof(std::uint64_t) +
-                 (h.fix.capacity() + h.cross.capacity() + h.left.capacity()) * sizeof(std::uint32_t) +
+                 (h.fix.capacity() + h.cross.capacity() + h.left.capacity() + h.dropped.capacity()) * sizeof(std::uint32_t) +
                  h.cross_values.capacity() * sizeof(double) + h.decision.capacity() +
                  h.band_counts.capacity() * sizeof(stddev_counts) + h.before.capacity() * sizeof(float) + h.added.capacity() +
                  h.recon.bytes();
@@ -283,6 +293,7 @@ private:
         std::vector<float> before;           // return_energy: colour of the pixels to rebuild
         std::vector<std::uint8_t> added;     // return_energy with a mask: light added here
         std::vector<std::uint32_t> left;     // pixels to rebuild that nothing reached (this frame)
+        std::vector<std::uint32_t> dropped;  // find_dropped: this half's dropped pixels, row-major
         reconstruct_scratch recon;
     };
 
@@ -332,6 +343,7 @@ private:
         detail::stage_clock clock(rep.stage_ms);
         stddev_bands(hb);
         exec_.run(2, [&](std::size_t h) { detect_candidates(halves_[h], rep.half[h]); });
+        if (options_.find_dropped) mark_dropped(a, b, rep);
         clock.lap(frame_report::candidates);
         // Stage 2 (serial): the ESD decision, reading and filling the lambda cache.
         {
@@ -433,6 +445,44 @@ private:
                 b.alpha.empty() ? b.alpha : *b.alpha.subview(0, y0, w, rows), options_.reduction, s.sd.data() + at,
                 s.label.data() + at);
         });
+    }
+
+    // find_dropped (dropped.hpp): a pixel black in one half (every colour channel 0) where the
+    // other is valid is a lone black; those the window test finds become non-finite pixels of
+    // their half (left out of every statistic, as black ones were, and rebuilt from the other
+    // half where it is usable, spatially else), listed for their masks and counted.
+    template <class C, class V, class A>
+    void mark_dropped(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b, frame_report& rep) {
+        const half_buffer<C, V, A>* hb[2] = {&a, &b};
+        const int w = a.color.width(), h = a.color.height(), nc = colour_channels(a.color.channels());
+        for (half_state& s : halves_) s.dropped.clear();
+        if (rep.half[0].ignored == 0 && rep.half[1].ignored == 0) return;
+        const std::uint8_t* lab[2] = {halves_[0].label.data(), halves_[1].label.data()};
+        lone_.assign(halves_[0].label.size(), 0);
+        std::vector<std::uint8_t> any(static_cast<std::size_t>(h), 0);
+        exec_.run(static_cast<std::size_t>(h), [&](std::size_t yy) {
+            const int y = static_cast<int>(yy);
+            for (int x = 0; x < w; ++x) {
+                const std::size_t i = index(x, y, w);
+                for (int k = 0; k < 2; ++k) {
+                    if (cls(lab[k][i]) != static_cast<std::uint8_t>(pixel_class::ignored) || cls(lab[1 - k][i]) != valid_class)
+                        continue;
+                    bool black = true;
+                    for (int c = 0; c < nc; ++c) black = black && hb[k]->color.load(x, y, c) == 0;
+                    if (black) lone_[i] = static_cast<std::uint8_t>(k + 1), any[yy] = 1;
+                }
+            }
+        });
+        if (std::find(any.begin(), any.end(), 1) == any.end()) return;
+        (void)find_dropped(lone_.data(), w, h, 2, options_.alpha, dropped_scratch_, exec_, dropped_found_);
+        for (const dropped_pixel& d : dropped_found_) {
+            half_state& s = halves_[d.buffer];
+            s.label[d.pixel] = static_cast<std::uint8_t>((s.label[d.pixel] & ~pixel_class_bits) | nonfinite_class);
+            s.sd[d.pixel] = std::numeric_limits<float>::quiet_NaN();
+            s.dropped.push_back(d.pixel);
+            ++rep.half[d.buffer].dropped;
+            --rep.half[d.buffer].ignored;
+        }
     }
 
     void detect_candidates(half_state& s, half_report& r) {
@@ -1012,7 +1062,7 @@ private:
         r.highlights = highlights;
         r.consistent = consistent;
         r.fireflies = s.fix.size();
-        if (r.nonfinite > 0)
+        if (r.nonfinite + r.dropped > 0)
             for (std::size_t i = 0; i < s.label.size(); ++i)
                 if (cls(label[i]) == nonfinite_class) {
                     label[i] |= fix_bit;
@@ -1173,6 +1223,11 @@ private:
                 if (l & other_half_bit) m |= mask_bits::other_half;
                 mask(x, y) = m;
             }
+        for (const std::uint32_t p : s.dropped) {  // non-finite to the rebuild, not to the user
+            std::uint8_t& m = mask(static_cast<int>(p % static_cast<std::uint32_t>(w)),
+                                   static_cast<int>(p / static_cast<std::uint32_t>(w)));
+            m = static_cast<std::uint8_t>((m & ~mask_bits::nonfinite) | mask_bits::dropped);
+        }
         for (const std::uint32_t p : s.left) {  // process() only: detect() rebuilds nothing
             const int x = static_cast<int>(p % static_cast<std::uint32_t>(w));
             const int y = static_cast<int>(p / static_cast<std::uint32_t>(w));
@@ -1188,6 +1243,9 @@ private:
     std::vector<std::uint32_t> pairs_;
     local_test_scratch local_scratch_;
     local_test_result local_result_;
+    std::vector<std::uint8_t> lone_;   // find_dropped: 1 + the half black alone at a pixel, or 0
+    dropped_scratch dropped_scratch_;
+    std::vector<dropped_pixel> dropped_found_;
     std::vector<double> frame_log_p_;  // the one-half fireflies' p-values (log), for the frame's level
     std::vector<double> pair_log_p_;   // per pair and half: the p-value (log) of its excess; NaN: none
     std::vector<double> pair_base_;    // per pair: the level its ordinary samples give (pair_rise)

@@ -85,7 +85,7 @@ void check_pixel(const frame_shape& f, const image_storage<T>& col, const image_
                  const image_storage<T>& var, const image_storage<T>& var0, int x, int y, std::uint8_t m,
                  bool finite) {
     const int sy = col.flip ? f.h - 1 - y : y, vy = var.flip ? f.h - 1 - y : y;
-    const bool marked = (m & (mask_bits::firefly | mask_bits::nonfinite)) != 0 && !(m & mask_bits::left);
+    const bool marked = (m & (mask_bits::firefly | mask_bits::nonfinite | mask_bits::dropped)) != 0 && !(m & mask_bits::left);
     bool pixel_finite = true;
     for (int c = 0; c < f.nc; ++c) pixel_finite = pixel_finite && std::isfinite(static_cast<double>(col0.at(x, sy, c)));
     for (int c = 0; c < f.nc; ++c) {
@@ -142,7 +142,7 @@ void check_frame(const frame_shape& f, const std::vector<image_storage<T>> (&s)[
         for (int y = 0; y < f.h; ++y)
             for (int x = 0; x < f.w; ++x) {
                 const std::uint8_t m = mask[static_cast<std::size_t>(i)][static_cast<std::size_t>(y * f.w + x)];
-                const bool found = (m & (mask_bits::firefly | mask_bits::nonfinite)) != 0;
+                const bool found = (m & (mask_bits::firefly | mask_bits::nonfinite | mask_bits::dropped)) != 0;
                 if ((m & mask_bits::left) && !found) fail("a left mask without what was found");
                 left_here += (m & mask_bits::left) != 0;
                 in_buffer += found && (f.k == 2 || !(m & mask_bits::left));
@@ -218,7 +218,7 @@ void run(FuzzedDataProvider& p) {
     check_frame(f, s, before, mask, r, finite);
     // (process() alone may add that pixels were left, and at K = 2 the bits of what it did:
     // energy added, rebuilt from the other half)
-    const std::uint8_t decided = mask_bits::firefly | mask_bits::nonfinite | mask_bits::highlight | mask_bits::consistent;
+    const std::uint8_t decided = mask_bits::firefly | mask_bits::nonfinite | mask_bits::dropped | mask_bits::highlight | mask_bits::consistent;
     bool same_masks = true;
     for (std::size_t i = 0; i < mask.size(); ++i)
         for (std::size_t j = 0; j < mask[i].size(); ++j) same_masks = same_masks && ((mask[i][j] ^ dmask[i][j]) & decided) == 0;

@@ -111,8 +111,8 @@ void check_frame(const frame_shape& f, const int (&nch)[3], half_storage<T> (&s)
                 const std::uint8_t m = mask[i][static_cast<std::size_t>(y * f.w + x)];
                 // A refused frame writes no mask, so it may change nothing.
                 // A left pixel (no usable value reached it) keeps its input.
-                const bool may_change = (m & (mask_bits::firefly | mask_bits::nonfinite)) != 0 && !(m & mask_bits::left);
-                if ((m & mask_bits::left) && !(m & (mask_bits::firefly | mask_bits::nonfinite)))
+                const bool may_change = (m & (mask_bits::firefly | mask_bits::nonfinite | mask_bits::dropped)) != 0 && !(m & mask_bits::left);
+                if ((m & mask_bits::left) && !(m & (mask_bits::firefly | mask_bits::nonfinite | mask_bits::dropped)))
                     fail("a left mask without what was found");
                 const bool may_grow = (m & mask_bits::energy) != 0;  // colour channels 0..2
                 if (may_grow && f.alpha && !(static_cast<double>(*element(before[i], 2, x, sy, 0)) > 0))

@@ -37,7 +37,8 @@ struct pixel_model {
     double p_ff = 0.0, p_caustic = 0.0;  // firefly probability per sample
     double energy_scale = 0.0;       // firefly sample value = energy_scale x ratio
     bool highlight = false;
-    bool bucket = false;
+    bool bucket = false;   // failed_bucket: NaN in buffer 0
+    bool dropped = false;  // dropped_bucket: black in buffer 0
     std::uint32_t touched = 0;
 };
 
@@ -119,9 +120,10 @@ public:
             p.sign = -0.2;  // the same pixels in every buffer
             p.touched |= negative;
         }
-        if ((fx_ & failed_bucket) && x >= bx_ && x < bx1_ && y >= by_ && y < by1_) {
-            p.bucket = true;
-            p.touched |= failed_bucket;
+        if ((fx_ & (failed_bucket | dropped_bucket)) && x >= bx_ && x < bx1_ && y >= by_ && y < by1_) {
+            p.bucket = (fx_ & failed_bucket) != 0;
+            p.dropped = (fx_ & dropped_bucket) != 0;
+            p.touched |= fx_ & (failed_bucket | dropped_bucket);
         }
         static constexpr double tint[3] = {1.0, 0.85, 0.7};
         for (int c = 0; c < 3; ++c) p.mu[c] = b * tint[c];

@@ -173,7 +173,7 @@ inline std::uint32_t simulate_pixel(const scene& sc, const pixel_model& p, std::
     return touched;
 }
 
-// Negative variances, NaN/Inf samples and the failed bucket, after the pixel is drawn.
+// Negative variances, NaN/Inf samples and the failed or dropped bucket, after the pixel is drawn.
 inline std::uint32_t damage_pixel(const pixel_model& p, int x, std::size_t i, int b, row_events& ev, buffers& out) {
     std::uint32_t touched = 0;
     const bool covered = p.cov > 0;
@@ -192,6 +192,8 @@ inline std::uint32_t damage_pixel(const pixel_model& p, int x, std::size_t i, in
         const float nan = std::numeric_limits<float>::quiet_NaN();
         for (int c = 0; c < 3; ++c) out.color[b][i * 3 + c] = out.variance[b][i * 3 + c] = nan;
         out.nonfinite[b][i] = 1;
+    } else if (p.dropped && b == 0) {
+        for (int c = 0; c < 3; ++c) out.color[b][i * 3 + c] = out.variance[b][i * 3 + c] = 0.0f;
     }
     return touched;
 }

@@ -56,6 +56,9 @@ inline bool named_accuracy_scene(const std::string& name, scene& s) {
     } else if (name == "failed_bucket") {
         // A render bucket that failed in half A: a NaN square 1/8 of the width, half B intact.
         s.effects = gradient | fireflies | failed_bucket;
+    } else if (name == "dropped_bucket") {
+        // The same bucket written black instead: colour and variance 0 in half A, half B intact.
+        s.effects = gradient | fireflies | dropped_bucket;
     } else if (name == "interior") {
         // A room lit by bounce light (../shared/data/cycles-interior): dark (most pixels below
         // 0.5), every pixel noisy with heavy-tailed (lognormal) samples, dense moderate

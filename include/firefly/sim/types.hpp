@@ -25,6 +25,8 @@ enum effect : std::uint32_t {
     caustics = 1u << 11,         // a few bright caustic blobs and streaks with a firefly rate of their own
     failed_bucket = 1u << 12,    // a square block of NaN colour and variance in buffer 0 only
     bright_region = 1u << 13,    // a bright, noisy, legitimate region (a lit ceiling, a light beam)
+    dropped_bucket = 1u << 14,   // the failed bucket's square written black (colour and variance
+                                 // 0) in buffer 0 only, as a renderer that never wrote it
 };
 
 struct scene {
@@ -52,7 +54,7 @@ struct scene {
     int caustic_count = 5;               // caustic blobs and streaks
     double caustic_radiance = 3.0;       // brightness inside a caustic, x the pixel's radiance
     double caustic_pixel_rate = 0.5;     // share of a caustic's core pixels hit, per half
-    double bucket_size = 0.125;          // failed bucket side, share of the width
+    double bucket_size = 0.125;          // failed (or dropped) bucket side, share of the width
     double bucket_x = 0.55, bucket_y = 0.3;  // its top-left corner, share of width and height
     // Bright region: a capsule around the segment (x0, y0)-(x1, y1) (shares of width, height).
     double region_x0 = 0.15, region_y0 = 0.1, region_x1 = 0.85, region_y1 = 0.1;

@@ -1,0 +1,294 @@
+// Dropped pixels (dropped.hpp): a buffer black where the others show it cannot be by chance.
+#include <firefly/firefly.hpp>
+#include <firefly/sim/scene.hpp>
+#include <firefly/sim/scenes.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "catch.hpp"
+#include "frame_views.hpp"
+
+using namespace firefly;
+using firefly_test::frame_views;
+
+namespace {
+
+// log P(Binomial(n, 1/k) >= a), summed term by term in long double.
+double direct_log_tail(int n, int a, int k) {
+    long double sum = 0, p = 1.0L / k;
+    for (int j = a; j <= n; ++j) {
+        long double c = 1;
+        for (int i = 0; i < j; ++i) c = c * (n - i) / (i + 1);
+        sum += c * std::pow(p, j) * std::pow(1 - p, n - j);
+    }
+    return static_cast<double>(std::log(sum));
+}
+
+struct lcg {
+    std::uint32_t s;
+    explicit lcg(std::uint32_t seed) : s(seed * 2654435761u + 12345u) {}
+    double next() {
+        s = s * 1664525u + 1013904223u;
+        return (s >> 8) / 16777216.0;
+    }
+};
+
+// A w x h lone map: each pixel a lone black with probability `rate`, of a buffer drawn
+// uniformly from k (the null: exchangeable buffers).
+std::vector<std::uint8_t> null_lone_map(int w, int h, int k, double rate, std::uint32_t seed) {
+    lcg r(seed);
+    std::vector<std::uint8_t> lone(static_cast<std::size_t>(w) * static_cast<std::size_t>(h), 0);
+    for (auto& l : lone)
+        if (r.next() < rate) l = static_cast<std::uint8_t>(1 + static_cast<int>(r.next() * k) % k);
+    return lone;
+}
+
+std::size_t pixel(int x, int y, int w) { return static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x); }
+
+// relMSE of the halves' mean against the expected image, over the square [x0, x0 + s)^2 (or the
+// whole frame when s is 0).
+double relmse(const sim::frame& f, int x0, int y0, int s) {
+    double sum = 0;
+    std::size_t n = 0;
+    for (int y = 0; y < f.height; ++y)
+        for (int x = 0; x < f.width; ++x) {
+            if (s > 0 && (x < x0 || x >= x0 + s || y < y0 || y >= y0 + s)) continue;
+            for (int c = 0; c < 3; ++c) {
+                const std::size_t i = pixel(x, y, f.width) * 3 + static_cast<std::size_t>(c);
+                const double ref = f.expected[i], v = 0.5 * (f.color[0][i] + f.color[1][i]);
+                sum += (v - ref) * (v - ref) / (ref * ref + 0.01);
+                ++n;
+            }
+        }
+    return sum / static_cast<double>(n);
+}
+
+}  // namespace
+
+TEST_CASE("binomial tail table: exact values, 1e-70 tails", "[dropped]") {
+    for (int k : {2, 3, 4, 8, 64}) {
+        detail::binomial_tail_table t;
+        t.build(k, 224);
+        CHECK(t.log_tail(0, 0) == 0.0);
+        for (int n : {1, 2, 7, 40, 224})
+            for (int a : {0, 1, n / 3, n / 2, n}) {
+                if (a > n) continue;
+                const double want = direct_log_tail(n, a, k);
+                CHECK(t.log_tail(n, a) == Approx(want).epsilon(1e-12).margin(1e-13));
+                CHECK(t.log_tail(n, a) <= 0.0);
+            }
+        CHECK(t.log_tail(224, 224) == Approx(-224 * std::log(static_cast<double>(k))).epsilon(1e-13));
+    }
+}
+
+TEST_CASE("find_dropped: a block of one buffer's lone blacks, nothing else", "[dropped]") {
+    const int w = 96, h = 64;
+    for (int k : {2, 4}) {
+        std::vector<std::uint8_t> lone = null_lone_map(w, h, k, 0.2, 3u);
+        for (int y = 20; y < 36; ++y)
+            for (int x = 40; x < 56; ++x) lone[pixel(x, y, w)] = 2;  // buffer 1 dropped
+        dropped_scratch s;
+        std::vector<dropped_pixel> found;
+        const std::size_t tested = find_dropped(lone.data(), w, h, k, 0.05, s, executor{}, found);
+        CHECK(tested == static_cast<std::size_t>(std::count_if(lone.begin(), lone.end(), [](std::uint8_t l) { return l != 0; })));
+        // Found: the block, and lone blacks of buffer 1 whose window reaches into it (their
+        // windows hold mostly the block's); nothing farther, nothing of another buffer.
+        std::size_t in = 0, near = 0, far = 0;
+        for (const dropped_pixel& d : found) {
+            const int x = static_cast<int>(d.pixel % w), y = static_cast<int>(d.pixel / w);
+            const bool inside = x >= 40 && x < 56 && y >= 20 && y < 36;
+            const bool reach = x >= 40 - 7 && x < 56 + 7 && y >= 20 - 7 && y < 36 + 7;
+            in += inside && d.buffer == 1;
+            near += !inside && reach && d.buffer == 1;
+            far += !reach || d.buffer != 1;
+        }
+        CHECK(in == 16u * 16u);
+        CHECK(far == 0);
+        CHECK(near < 16u * 16u / 2);
+    }
+}
+
+TEST_CASE("find_dropped keeps its promise on exchangeable buffers", "[dropped][calibration]") {
+    // 400 frames without a dropped region, lone blacks at 2% and 30% of the pixels: at most
+    // alpha of them with any pixel found (expected <= 20 of 400; 3 binomial sds above: 33).
+    for (int k : {2, 4})
+        for (double rate : {0.02, 0.3}) {
+            int frames_with_any = 0;
+            dropped_scratch s;
+            std::vector<dropped_pixel> found;
+            for (std::uint32_t seed = 0; seed < 400; ++seed) {
+                const std::vector<std::uint8_t> lone = null_lone_map(48, 48, k, rate, 1000u + seed);
+                (void)find_dropped(lone.data(), 48, 48, k, 0.05, s, executor{}, found);
+                frames_with_any += !found.empty();
+            }
+            INFO("k " << k << " rate " << rate);
+            CHECK(frames_with_any <= 33);
+        }
+}
+
+TEST_CASE("find_dropped: flips, transposes and executors give the same pixels", "[dropped]") {
+    const int w = 70, h = 45;
+    std::vector<std::uint8_t> lone = null_lone_map(w, h, 2, 0.3, 9u);
+    for (int y = 5; y < 30; ++y)
+        for (int x = 3; x < 20 + y / 2; ++x) lone[pixel(x, y, w)] = 1;
+    auto found_set = [](const std::vector<std::uint8_t>& l, int ww, int hh, const executor& e) {
+        dropped_scratch s;
+        std::vector<dropped_pixel> f;
+        (void)find_dropped(l.data(), ww, hh, 2, 0.05, s, e, f);
+        std::vector<std::uint8_t> m(l.size(), 0);
+        for (const dropped_pixel& d : f) m[d.pixel] = static_cast<std::uint8_t>(1 + d.buffer);
+        return m;
+    };
+    const std::vector<std::uint8_t> base = found_set(lone, w, h, executor{});
+    CHECK(std::count(base.begin(), base.end(), 1) > 300);
+    CHECK(found_set(lone, w, h, executor::threads(2)) == base);
+    std::vector<std::uint8_t> flipped(lone.size()), transposed(lone.size());
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            flipped[pixel(w - 1 - x, y, w)] = lone[pixel(x, y, w)];
+            transposed[pixel(y, x, h)] = lone[pixel(x, y, w)];
+        }
+    const std::vector<std::uint8_t> f = found_set(flipped, w, h, executor{}), t = found_set(transposed, h, w, executor{});
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            REQUIRE(f[pixel(w - 1 - x, y, w)] == base[pixel(x, y, w)]);
+            REQUIRE(t[pixel(y, x, h)] == base[pixel(x, y, w)]);
+        }
+}
+
+TEST_CASE("a bucket written black in half A is rebuilt from half B", "[dropped][pipeline]") {
+    const sim::scene sc = sim::named_scene("dropped_bucket", 256, 192, 6);
+    sim::scene intact_sc = sc;
+    intact_sc.effects &= ~static_cast<std::uint32_t>(sim::dropped_bucket);
+    frame_views v(sim::simulate(sc)), intact(sim::simulate(intact_sc));
+    const int x0 = static_cast<int>(sc.bucket_x * 256), y0 = static_cast<int>(sc.bucket_y * 192), side = 32;
+    std::size_t black = 0;
+    for (int y = y0; y < y0 + side; ++y)
+        for (int x = x0; x < x0 + side; ++x) black += v.col(0, x, y) == 0 && v.var(0, x, y) == 0 && v.col(1, x, y) > 0;
+    REQUIRE(black == 32u * 32u);
+    const double before = relmse(v.f, x0, y0, side);
+    detector d;
+    const frame_report r = v.process(d);
+    REQUIRE(r.ok());
+    CHECK(r.half[0].dropped == 32u * 32u);
+    CHECK(r.half[1].dropped == 0);
+    CHECK(r.half[0].ignored == 0);
+    CHECK(r.half[0].nonfinite == 0);
+    std::size_t marked = 0, other = 0;
+    for (int y = 0; y < v.f.height; ++y)
+        for (int x = 0; x < v.f.width; ++x) {
+            const bool in = x >= x0 && x < x0 + side && y >= y0 && y < y0 + side;
+            const std::uint8_t m = v.mask[0][v.at(x, y)];
+            marked += in && (m & mask_bits::dropped) && !(m & mask_bits::nonfinite);
+            other += !in && (m & mask_bits::dropped);
+            other += (v.mask[1][v.at(x, y)] & mask_bits::dropped) != 0;
+        }
+    CHECK(marked == 32u * 32u);
+    CHECK(other == 0);
+    detector di;
+    (void)intact.process(di);
+    const double after = relmse(v.f, x0, y0, side), intact_err = relmse(intact.f, x0, y0, side);
+    INFO("bucket relMSE before " << before << " after " << after << " intact frame, cleaned " << intact_err);
+    CHECK(before > 0.15);                 // half the light is missing there
+    CHECK(after < 2.0 * intact_err);      // about what the intact frame gives there
+    CHECK(relmse(v.f, 0, 0, 0) < 1.2 * relmse(intact.f, 0, 0, 0));
+    // Rebuilt as a non-finite pixel would be: from the other half, variance with it.
+    for (int y = y0; y < y0 + side; ++y)
+        for (int x = x0; x < x0 + side; ++x) REQUIRE(v.var(0, x, y) > 0);
+}
+
+TEST_CASE("find_dropped off, and detect(): the bucket is left as it is", "[dropped][pipeline]") {
+    const sim::scene sc = sim::named_scene("dropped_bucket", 128, 96, 2);
+    frame_views off(sim::simulate(sc)), det(sim::simulate(sc));
+    const std::vector<float> input = off.f.color[0];
+    detector_options o;
+    o.find_dropped = false;
+    detector d(o);
+    const frame_report r = off.process(d);
+    CHECK(r.half[0].dropped == 0);
+    CHECK(r.half[0].ignored == 16u * 16u);
+    const int x0 = static_cast<int>(sc.bucket_x * 128), y0 = static_cast<int>(sc.bucket_y * 96);
+    CHECK(off.col(0, x0 + 3, y0 + 3) == 0.0f);
+    detector dd;
+    const frame_report rd = det.detect(dd);
+    CHECK(rd.half[0].dropped == 16u * 16u);
+    CHECK(det.f.color[0] == input);  // detect() writes nothing
+    CHECK((det.mask[0][det.at(x0 + 3, y0 + 3)] & mask_bits::dropped) != 0);
+}
+
+TEST_CASE("lone blacks that both halves share alike are left alone", "[dropped][pipeline][calibration]") {
+    // A dark frame at few samples: a third of its pixels black in either half, independently.
+    // Twenty seeds: no pixel found dropped in more than alpha of them (expected <= 1).
+    int frames_with_any = 0;
+    for (std::uint64_t seed = 1; seed <= 20; ++seed) {
+        sim::scene sc = sim::named_scene("sparse_fireflies", 96, 64, seed);
+        frame_views v(sim::simulate(sc));
+        lcg r(static_cast<std::uint32_t>(seed));
+        for (int y = 0; y < 64; ++y)
+            for (int x = 0; x < 96; ++x)
+                for (int h = 0; h < 2; ++h)
+                    if (r.next() < 0.33) v.set(h, x, y, 0.0f, 0.0f);
+        detector d;
+        const frame_report rep = v.detect(d);
+        frames_with_any += rep.half[0].dropped + rep.half[1].dropped > 0;
+    }
+    CHECK(frames_with_any <= 3);
+}
+
+TEST_CASE("a whole half written black is rebuilt from the other", "[dropped][pipeline]") {
+    frame_views v(sim::simulate(sim::named_scene("sparse_fireflies", 64, 48, 4)));
+    for (int y = 0; y < 48; ++y)
+        for (int x = 0; x < 64; ++x) v.set(1, x, y, 0.0f, 0.0f);
+    detector d;
+    const frame_report r = v.process(d);
+    REQUIRE(r.ok());
+    CHECK(r.half[1].dropped == 64u * 48u);
+    for (int y = 0; y < 48; ++y)
+        for (int x = 0; x < 64; ++x) REQUIRE(v.col(1, x, y) > 0);
+}
+
+TEST_CASE("K buffers: a render written black in one bucket is rebuilt from the others", "[dropped][buffers]") {
+    for (int k : {3, 4, 8}) {
+        sim::buffers b = sim::simulate_buffers(sim::named_scene("sparse_fireflies", 128, 96, 3), k);
+        const int w = b.width, h = b.height;
+        for (int y = 30; y < 50; ++y)
+            for (int x = 60; x < 84; ++x)
+                for (int c = 0; c < 3; ++c) b.color[1][pixel(x, y, w) * 3 + static_cast<std::size_t>(c)] = 0.0f;
+        std::vector<buffer_view<float>> views;
+        std::vector<std::vector<std::uint8_t>> mk(static_cast<std::size_t>(k), std::vector<std::uint8_t>(b.pixels(), 0));
+        std::vector<image_view<std::uint8_t>> masks;
+        for (int i = 0; i < k; ++i) {
+            views.push_back({*make_image_view(b.color[static_cast<std::size_t>(i)].data(), w, h, 3), {}});
+            masks.push_back(*make_image_view(mk[static_cast<std::size_t>(i)].data(), w, h, 1));
+        }
+        cross_buffer_detector d;
+        const cross_buffer_report r = d.process(views, masks);
+        INFO("K = " << k);
+        REQUIRE(r.ok());
+        CHECK(r.dropped == 20u * 24u);
+        CHECK(r.nonfinite == 0);
+        std::size_t marked = 0;
+        for (int y = 30; y < 50; ++y)
+            for (int x = 60; x < 84; ++x) {
+                marked += mk[1][pixel(x, y, w)] == mask_bits::dropped;
+                // the mean of the others: never black again
+                REQUIRE(b.color[1][pixel(x, y, w) * 3] > 0);
+            }
+        CHECK(marked == 20u * 24u);
+        cross_buffer_options off;
+        off.find_dropped = false;
+        sim::buffers b2 = sim::simulate_buffers(sim::named_scene("sparse_fireflies", 128, 96, 3), k);
+        for (int y = 30; y < 50; ++y)
+            for (int x = 60; x < 84; ++x)
+                for (int c = 0; c < 3; ++c) b2.color[1][pixel(x, y, w) * 3 + static_cast<std::size_t>(c)] = 0.0f;
+        std::vector<buffer_view<float>> v2;
+        for (int i = 0; i < k; ++i) v2.push_back({*make_image_view(b2.color[static_cast<std::size_t>(i)].data(), w, h, 3), {}});
+        cross_buffer_detector d2(off);
+        CHECK(d2.process(v2).dropped == 0);
+        // left black (the energy return may add the others' returned light, no more)
+        CHECK(b2.color[1][pixel(70, 40, w) * 3] < 0.25f * b2.color[0][pixel(70, 40, w) * 3]);
+    }
+}
