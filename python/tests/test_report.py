@@ -9,7 +9,7 @@ import pytest
 import firefly
 from conftest import arrays_of, make_frame, same_bits
 
-HALF_FIELDS = ["pixels", "valid", "ignored", "nonfinite", "negative_variance", "median", "mad", "bound",
+HALF_FIELDS = ["pixels", "valid", "ignored", "nonfinite", "dropped", "negative_variance", "median", "mad", "bound",
                "outliers", "local", "highlights", "consistent", "frame_kept", "fireflies", "repaired", "from_other_half", "unreachable", "phase1_rounds",
                "phase2_iterations", "final_change", "reconstruction"]
 FRAME_FIELDS = ["ok", "error", "both_outliers", "variance_calibration", "single_level", "lambdas_computed", "scratch_bytes", "stage_ms", "half"]
@@ -168,3 +168,24 @@ def test_a_frame_with_nothing_to_rebuild_from_returns_a_report():
         assert np.all(m == firefly.MASK_NONFINITE | firefly.MASK_LEFT)
     assert np.all(np.isnan(arrays["a_color"]))
     assert rep.as_dict()["error"]["ok"] is False
+
+
+def test_a_bucket_written_black_is_found_and_rebuilt():
+    """A 16x16 square black in half A (colour and variance 0) over half B's content: dropped,
+    MASK_DROPPED (not MASK_NONFINITE), rebuilt from half B; off with find_dropped=False."""
+    frame = make_frame(seed=3)
+    frame["a_color"][30:46, 40:56] = 0
+    frame["a_variance"][30:46, 40:56] = 0
+    h, w = frame["a_color"].shape[:2]
+    masks = [np.zeros((h, w), np.uint8) for _ in range(2)]
+    kept = {k: v.copy() for k, v in arrays_of(frame).items()}
+    rep = firefly.Detector().process(**arrays_of(frame), a_mask=masks[0], b_mask=masks[1])
+    assert rep.ok and rep.half[0].dropped == 256 and rep.half[1].dropped == 0
+    assert rep.as_dict()["half"][0]["dropped"] == 256
+    square = masks[0][30:46, 40:56]
+    assert (square & firefly.MASK_DROPPED).all() and not (square & firefly.MASK_NONFINITE).any()
+    assert firefly.MASK_DROPPED == 128
+    assert (frame["a_color"][30:46, 40:56] > 0).all()
+    off = firefly.Detector(find_dropped=False).process(**kept)
+    assert off.half[0].dropped == 0 and off.half[0].ignored == 256
+    assert (kept["a_color"][30:46, 40:56] == 0).all()
