@@ -89,7 +89,7 @@ def test_options_round_trip():
                "highlight_rule": "agree", "max_ratio": 3.0, "max_relative_error": 0.6, "min_excess_z": 0.0,
                "cluster_relative_error": 0.0, "kernel_width": 7, "sigma": 1.5, "tolerance": 1e-2,
                "max_iterations": 0, "rebuild": "spatial", "blend_spatial": False, "reconstruct": False,
-               "return_energy": True, "energy_sigma": 4.0, "energy_coarse_sigma": 16.0,
+               "find_dropped": False, "return_energy": True, "energy_sigma": 4.0, "energy_coarse_sigma": 16.0,
                "local_test": False, "local_false_alarm": 1e-3, "local_radius": 2, "local_min_neighbours": 4,
                "local_variance_scale": 2.0, "local_spatial": False, "local_homogeneity": 0.05}
     assert set(changed) == set(defaults)  # every option is covered here
