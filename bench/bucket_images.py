@@ -1,8 +1,9 @@
 #!/usr/bin/python3
 """The README's failed-bucket pictures: the Cycles caustics render with a NaN square in half A
 (a render bucket that failed), cleaned by firefly's default (rebuilt from half B) and by the
-paper's spatial rule, next to the reference. Needs the Python module on PYTHONPATH and
-python3-openimageio.
+paper's spatial rule, next to the reference; then the same square written black (a bucket that
+failed to zero), cleaned at the defaults (found dropped, rebuilt from half B) and with
+find_dropped off. Needs the Python module on PYTHONPATH and python3-openimageio.
 
     PYTHONPATH=build/tests/python bench/bucket_images.py ../shared/data/cycles-caustics docs
 """
@@ -50,7 +51,26 @@ def main():
     intact = firefly.Detector()
     ia, ib = read_pfm(f"{src}/a_color.pfm"), b.copy()
     intact.process(ia, read_pfm(f"{src}/a_variance.pfm"), ib, read_pfm(f"{src}/b_variance.pfm"))
-    print(f"intact frame: relMSE in the same square {relmse((0.5 * ia + 0.5 * ib)[box], ref[box]):.4f}")
+    print(f"intact frame: relMSE in the same square {relmse((0.5 * ia + 0.5 * ib)[box], ref[box]):.4f}, "
+          f"frame {relmse(0.5 * ia + 0.5 * ib, ref):.5f}")
+    black(src, out, (y0, x0, size), crop, ref)
+
+
+def black(src, out, square, crop, ref):
+    """The square written black (colour and variance 0) in half A."""
+    a, va, b, vb = (read_pfm(f"{src}/{n}.pfm") for n in ("a_color", "a_variance", "b_color", "b_variance"))
+    y0, x0, size = square
+    box = (slice(y0, y0 + size), slice(x0, x0 + size))
+    a[box] = 0.0
+    va[box] = 0.0
+    write_png(f"{out}/bucket_black_input.png", 0.5 * a + 0.5 * b, crop)
+    for name, find in (("firefly", True), ("kept", False)):
+        ca, cva, cb, cvb = a.copy(), va.copy(), b.copy(), vb.copy()
+        rep = firefly.Detector(find_dropped=find).process(ca, cva, cb, cvb)
+        final = 0.5 * ca + 0.5 * cb
+        write_png(f"{out}/bucket_black_{name}.png", final, crop)
+        print(f"black square, find_dropped={find}: relMSE in the square {relmse(final[box], ref[box]):.4f}, "
+              f"frame {relmse(final, ref):.5f}, dropped {rep.half[0].dropped} + {rep.half[1].dropped}")
 
 
 if __name__ == "__main__":
