@@ -7,6 +7,7 @@
 // iterations outside the timed region. Counters (means over the iterations):
 //   candidates_ms esd_ms highlights_ms other_half_ms rebuild_ms  frame_report::stage_ms
 //   rebuilt          half[k].fireflies + half[k].repaired, both halves
+//   dropped          half[k].dropped (black where the other half shows it cannot be), both halves
 //   rebuild_ns_px    rebuild stage ns per rebuilt pixel
 //   scratch_b_px_half  detector memory after the frame, bytes per pixel per half
 //   cold_over_warm   (cold cases) cold frame time / warm frame time, interleaved
@@ -271,6 +272,7 @@ void set_counters(benchmark::State& st, const tally& t, const frame_report& r, r
     if (threads <= 1) st.counters["x_read_cpu"] = t.cpu_mean() / unit.cpu;
     st.counters["rebuilt"] = n;
     st.counters["outliers"] = static_cast<double>(r.half[0].outliers + r.half[1].outliers);
+    st.counters["dropped"] = static_cast<double>(r.half[0].dropped + r.half[1].dropped);
     st.counters["rebuild_ns_px"] = n > 0 ? t.stage_mean(frame_report::rebuild) * 1e6 / n : 0.0;
     st.counters["lambdas"] = static_cast<double>(r.lambdas_computed);
     st.counters["scratch_b_px_half"] = static_cast<double>(r.scratch_bytes) / (2.0 * static_cast<double>(r.half[0].pixels));
@@ -499,6 +501,7 @@ int register_all() {
             ->Unit(benchmark::kMillisecond);
     add_frame("failed_bucket", k2, false, false, true);
     add_frame("no_bucket", k2, false, false, false);
+    add_frame("dropped_bucket", k2, false, false, false);  // the failed bucket written black
     add_frame("dense30", k2, false, true, true);
     for (size2 s : {small, k2}) {
         benchmark::RegisterBenchmark(("target_failed_bucket/" + s.label()).c_str(), target_failed_bucket, s.w, s.h)
