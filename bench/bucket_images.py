@@ -31,6 +31,16 @@ def relmse(img, ref):
     return float(np.mean((img - ref) ** 2 / (ref ** 2 + 0.01)))
 
 
+def cleaned(halves, path, crop, **options):
+    """The halves (colour, variance, colour, variance) cleaned on copies with the options, their
+    mean written as a PNG crop; returns the report and the mean."""
+    ca, cva, cb, cvb = (x.copy() for x in halves)
+    rep = firefly.Detector(**options).process(ca, cva, cb, cvb)
+    final = 0.5 * ca + 0.5 * cb
+    write_png(path, final, crop)
+    return rep, final
+
+
 def main():
     src, out = sys.argv[1], sys.argv[2]
     a, va, b, vb, ref = (read_pfm(f"{src}/{n}.pfm") for n in ("a_color", "a_variance", "b_color", "b_variance", "reference"))
@@ -42,10 +52,7 @@ def main():
     write_png(f"{out}/bucket_input.png", 0.5 * a + 0.5 * b, crop)
     write_png(f"{out}/bucket_reference.png", ref, crop)
     for name, rebuild in (("firefly", "other_half"), ("spatial", "spatial")):
-        ca, cva, cb, cvb = a.copy(), va.copy(), b.copy(), vb.copy()
-        rep = firefly.Detector(rebuild=rebuild).process(ca, cva, cb, cvb)
-        final = 0.5 * ca + 0.5 * cb
-        write_png(f"{out}/bucket_{name}.png", final, crop)
+        rep, final = cleaned((a, va, b, vb), f"{out}/bucket_{name}.png", crop, rebuild=rebuild)
         print(f"{name}: relMSE in the bucket {relmse(final[box], ref[box]):.4f}, frame {relmse(final, ref):.4f}, "
               f"status {'ok' if rep.ok else 'not ok'}")
     intact = firefly.Detector()
@@ -53,22 +60,17 @@ def main():
     intact.process(ia, read_pfm(f"{src}/a_variance.pfm"), ib, read_pfm(f"{src}/b_variance.pfm"))
     print(f"intact frame: relMSE in the same square {relmse((0.5 * ia + 0.5 * ib)[box], ref[box]):.4f}, "
           f"frame {relmse(0.5 * ia + 0.5 * ib, ref):.5f}")
-    black(src, out, (y0, x0, size), crop, ref)
+    black(src, out, box, crop, ref)
 
 
-def black(src, out, square, crop, ref):
-    """The square written black (colour and variance 0) in half A."""
+def black(src, out, box, crop, ref):
+    """The same square written black (colour and variance 0) in half A."""
     a, va, b, vb = (read_pfm(f"{src}/{n}.pfm") for n in ("a_color", "a_variance", "b_color", "b_variance"))
-    y0, x0, size = square
-    box = (slice(y0, y0 + size), slice(x0, x0 + size))
     a[box] = 0.0
     va[box] = 0.0
     write_png(f"{out}/bucket_black_input.png", 0.5 * a + 0.5 * b, crop)
     for name, find in (("firefly", True), ("kept", False)):
-        ca, cva, cb, cvb = a.copy(), va.copy(), b.copy(), vb.copy()
-        rep = firefly.Detector(find_dropped=find).process(ca, cva, cb, cvb)
-        final = 0.5 * ca + 0.5 * cb
-        write_png(f"{out}/bucket_black_{name}.png", final, crop)
+        rep, final = cleaned((a, va, b, vb), f"{out}/bucket_black_{name}.png", crop, find_dropped=find)
         print(f"black square, find_dropped={find}: relMSE in the square {relmse(final[box], ref[box]):.4f}, "
               f"frame {relmse(final, ref):.5f}, dropped {rep.half[0].dropped} + {rep.half[1].dropped}")
 
