@@ -626,14 +626,15 @@ private:
             detail::pixel_buffers p;
             for (int x = 0; x < w; ++x) {
                 int black = -1, blacks = 0;
-                bool usable = true;
-                for (int i = 0; i < k && usable && blacks < 2; ++i) {
+                for (int i = 0; i < k && blacks < 2; ++i)
+                    if (is_black(b[i].color, x, y)) black = i, ++blacks;
+                if (blacks != 1) continue;
+                bool usable = true;  // every buffer finite (colour and variance)
+                for (int i = 0; i < k && usable; ++i) {
                     read_buffer(b[i], x, y, has_var, i, p);
                     usable = p.finite[static_cast<std::size_t>(i)];
-                    if (usable && p.level[static_cast<std::size_t>(i)] == 0 && is_black(b[i].color, x, y))
-                        black = i, ++blacks;
                 }
-                if (usable && blacks == 1) lone_[index(x, y, w)] = static_cast<std::uint8_t>(black + 1), any[yy] = 1;
+                if (usable) lone_[index(x, y, w)] = static_cast<std::uint8_t>(black + 1), any[yy] = 1;
             }
         });
         if (std::find(any.begin(), any.end(), 1) == any.end()) return;
