@@ -5,10 +5,13 @@
 //   make_nan shift IN.exr OUT.exr X Y     IN's channels with the data window moved to
 //                                         (X, Y) and a display window around it
 //   make_nan alpha IN.exr OUT.exr         IN's channels and windows, and alpha A = 1
+//   make_nan black IN.exr OUT.exr X Y S   IN with every channel of the S x S square at (X, Y)
+//                                         (data-window coordinates) set to 0: a bucket written black
 //   make_nan bigwindow IN.exr OUT.exr     IN's bytes with the header's data window made
 //                                         65536 x 65536 (a small file claiming 4 G pixels)
 //   make_nan info FILE.exr                prints "data X0 Y0 X1 Y1 display X0 Y0 X1 Y1
 //                                         nonfinite N" (N: non-finite samples, all channels)
+#include <algorithm>
 #include <cfloat>
 #include <cmath>
 #include <cstdint>
@@ -68,6 +71,25 @@ int shift(int argc, char** argv) {
     return e.empty() ? 0 : 1;
 }
 
+int black(int argc, char** argv) {
+    if (argc != 7) return 2;
+    firefly_tools::image img;
+    std::string e = firefly_tools::read_exr(argv[2], channel_names(argv[2]), img);
+    if (!e.empty()) {
+        std::fprintf(stderr, "%s\n", e.c_str());
+        return 1;
+    }
+    const int x0 = std::atoi(argv[4]), y0 = std::atoi(argv[5]), side = std::atoi(argv[6]);
+    const std::size_t n = img.channels.size();
+    for (int y = std::max(0, y0); y < std::min(img.height, y0 + side); ++y)
+        for (int x = std::max(0, x0); x < std::min(img.width, x0 + side); ++x)
+            for (std::size_t c = 0; c < n; ++c)
+                img.pixels[(static_cast<std::size_t>(y) * static_cast<std::size_t>(img.width) + static_cast<std::size_t>(x)) * n + c] = 0.0f;
+    e = firefly_tools::write_exr(argv[3], img);
+    if (!e.empty()) std::fprintf(stderr, "%s\n", e.c_str());
+    return e.empty() ? 0 : 1;
+}
+
 int bigwindow(int argc, char** argv) {
     if (argc != 4) return 2;
     std::FILE* f = std::fopen(argv[2], "rb");
@@ -118,6 +140,7 @@ int main(int argc, char** argv) {
         if (argc >= 2 && std::strcmp(argv[1], "alpha") == 0) return argc == 4 ? shift(argc, argv) : 2;
         if (argc >= 2 && std::strcmp(argv[1], "info") == 0) return info(argc, argv);
         if (argc >= 2 && std::strcmp(argv[1], "bigwindow") == 0) return bigwindow(argc, argv);
+        if (argc >= 2 && std::strcmp(argv[1], "black") == 0) return black(argc, argv);
     } catch (const std::exception& e) {
         std::fprintf(stderr, "%s\n", e.what());
         return 1;
