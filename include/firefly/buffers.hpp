@@ -376,7 +376,7 @@ public:
     std::size_t scratch_bytes() const noexcept {
         return (noise_.capacity() + log_p_.capacity() + excess_.capacity()) *
                    sizeof(double) + level_.capacity() * sizeof(float) + refined_.capacity() +
-               lone_.capacity() + dropped_at_.capacity() + dropped_scratch_.bytes() +
+               dropped_at_.capacity() + dropped_scratch_.bytes() +
                dropped_found_.capacity() * sizeof(dropped_pixel) +
                energy_.bytes() + pair_.scratch_bytes();
     }
@@ -619,36 +619,22 @@ private:
         dropped_at_.clear();
         if (!options_.find_dropped) return;
         const int w = b[0].color.width(), h = b[0].color.height();
-        lone_.assign(static_cast<std::size_t>(w) * static_cast<std::size_t>(h), 0);
-        std::vector<std::uint8_t> any(static_cast<std::size_t>(h), 0);
-        exec_.run(static_cast<std::size_t>(h), [&](std::size_t yy) {
-            const int y = static_cast<int>(yy);
-            detail::pixel_buffers p;
-            for (int x = 0; x < w; ++x) {
-                int black = -1, blacks = 0;
-                for (int i = 0; i < k && blacks < 2; ++i)
-                    if (is_black(b[i].color, x, y)) black = i, ++blacks;
-                if (blacks != 1) continue;
-                bool usable = true;  // every buffer finite (colour and variance)
-                for (int i = 0; i < k && usable; ++i) {
-                    read_buffer(b[i], x, y, has_var, i, p);
-                    usable = p.finite[static_cast<std::size_t>(i)];
-                }
-                if (usable) lone_[index(x, y, w)] = static_cast<std::uint8_t>(black + 1), any[yy] = 1;
+        auto lone_at = [&](int x, int y) -> std::uint8_t {
+            int black = -1, blacks = 0;
+            for (int i = 0; i < k && blacks < 2; ++i)
+                if (detail::colour_is_black(b[i].color, x, y)) black = i, ++blacks;
+            if (blacks != 1) return 0;
+            detail::pixel_buffers p;  // every buffer finite (colour and variance)
+            for (int i = 0; i < k; ++i) {
+                read_buffer(b[i], x, y, has_var, i, p);
+                if (!p.finite[static_cast<std::size_t>(i)]) return 0;
             }
-        });
-        if (std::find(any.begin(), any.end(), 1) == any.end()) return;
-        (void)find_dropped(lone_.data(), w, h, k, options_.alpha, dropped_scratch_, exec_, dropped_found_);
+            return static_cast<std::uint8_t>(black + 1);
+        };
+        (void)find_dropped(w, h, k, options_.alpha, lone_at, dropped_scratch_, exec_, dropped_found_);
         if (dropped_found_.empty()) return;
-        dropped_at_.assign(lone_.size(), 0);
+        dropped_at_.assign(static_cast<std::size_t>(w) * static_cast<std::size_t>(h), 0);
         for (const dropped_pixel& d : dropped_found_) dropped_at_[d.pixel] = static_cast<std::uint8_t>(d.buffer + 1);
-    }
-
-    template <class C>
-    static bool is_black(const image_view<C>& color, int x, int y) {
-        for (int c = 0; c < colour_channels(color.channels()); ++c)
-            if (color.load(x, y, c) != 0) return false;
-        return true;
     }
 
     // Pass 1: every pixel's own noise and level (before anything is rebuilt; NaN where they
@@ -970,7 +956,6 @@ private:
     std::vector<float> level_;   // per pixel: lower_level, its buffers' lower half (NaN: none usable)
     std::vector<std::uint8_t> refined_;  // per pixel: its noise pooled without the buffers flagged at the cap
     std::vector<double> excess_;        // energy return: what was removed, 3 channels per pixel
-    std::vector<std::uint8_t> lone_;        // find_dropped: 1 + the buffer black alone at a pixel, or 0
     std::vector<std::uint8_t> dropped_at_;  // 1 + the buffer found dropped at a pixel, or 0 (empty: none)
     dropped_scratch dropped_scratch_;
     std::vector<dropped_pixel> dropped_found_;

@@ -37,6 +37,7 @@
 #include <limits>
 #include <vector>
 
+#include "image_view.hpp"
 #include "parallel.hpp"
 
 namespace firefly {
@@ -51,6 +52,14 @@ struct dropped_pixel {
 namespace detail {
 
 inline constexpr int dropped_radius = 7;  // the window: 15 x 15 pixels
+
+// Whether pixel (x, y) is black: its colour channels (the first three) all 0.
+template <class C>
+bool colour_is_black(const image_view<C>& color, int x, int y) {
+    for (int c = 0; c < std::min(color.channels(), 3); ++c)
+        if (color.load(x, y, c) != 0) return false;
+    return true;
+}
 
 // log P(Binomial(n, 1/k) >= a) for 0 <= a <= n <= n_max, one table per k.
 class binomial_tail_table {
@@ -71,14 +80,14 @@ public:
                 pmf[static_cast<std::size_t>(a)] = log_c + a * lp + (n - a) * lq;
                 log_c += std::log(static_cast<double>(n - a)) - std::log(static_cast<double>(a + 1));
             }
-            std::vector<double> t(static_cast<std::size_t>(n + 1));
+            tail_.resize(tail_.size() + static_cast<std::size_t>(n + 1));
+            double* t = &tail_[row_[static_cast<std::size_t>(n)]];
             double acc = -HUGE_VAL;  // the tail from the top down: log-sum-exp of the terms
             for (int a = n; a >= 0; --a) {
                 const double v = pmf[static_cast<std::size_t>(a)], hi = std::max(acc, v);
                 acc = hi == -HUGE_VAL ? hi : hi + std::log1p(std::exp(std::min(acc, v) - hi));
-                t[static_cast<std::size_t>(a)] = std::min(acc, 0.0);
+                t[a] = std::min(acc, 0.0);
             }
-            tail_.insert(tail_.end(), t.begin(), t.end());
         }
     }
     double log_tail(int n, int a) const noexcept { return tail_[row_[static_cast<std::size_t>(n)] + static_cast<std::size_t>(a)]; }
@@ -94,9 +103,10 @@ private:
 // Work memory of find_dropped, kept between frames.
 struct dropped_scratch {
     detail::binomial_tail_table table;
+    std::vector<std::uint8_t> lone;                // the lone blacks (find_dropped with lone_at)
     std::vector<std::vector<dropped_pixel>> rows;  // candidates per row
     std::size_t bytes() const noexcept {
-        std::size_t n = rows.capacity() * sizeof(std::vector<dropped_pixel>);
+        std::size_t n = lone.capacity() + rows.capacity() * sizeof(std::vector<dropped_pixel>);
         for (const auto& r : rows) n += r.capacity() * sizeof(dropped_pixel);
         return n;
     }
@@ -139,6 +149,26 @@ inline std::size_t find_dropped(const std::uint8_t* lone, int w, int h, int k, d
         for (const dropped_pixel& d : row)
             if (d.log_p <= level) out.push_back(d);
     return tested;
+}
+
+// The same, the lone blacks given by lone_at(x, y) (0, or 1 + the buffer black alone at the
+// pixel), taken row by row across the executor into s.lone; no window pass where none is.
+template <class LoneAt>
+std::size_t find_dropped(int w, int h, int k, double alpha, LoneAt&& lone_at, dropped_scratch& s, const executor& exec,
+                         std::vector<dropped_pixel>& out) {
+    const std::size_t row = static_cast<std::size_t>(w);
+    s.lone.resize(row * static_cast<std::size_t>(h));
+    std::vector<std::uint8_t> any(static_cast<std::size_t>(h), 0);
+    exec.run(static_cast<std::size_t>(h), [&](std::size_t y) {
+        for (int x = 0; x < w; ++x) {
+            const std::uint8_t l = lone_at(x, static_cast<int>(y));
+            s.lone[y * row + static_cast<std::size_t>(x)] = l;
+            any[y] = any[y] || l != 0;
+        }
+    });
+    out.clear();
+    if (std::find_if(any.begin(), any.end(), [](std::uint8_t a) { return a != 0; }) == any.end()) return 0;
+    return find_dropped(s.lone.data(), w, h, k, alpha, s, exec, out);
 }
 
 }  // namespace firefly

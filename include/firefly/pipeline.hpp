@@ -229,7 +229,7 @@ public:
                          pair_family_.capacity()) * sizeof(double) +
                         (visit_.capacity() + visit_tmp_.capacity()) * sizeof(std::uint64_t) +
                         frame_log_p_.capacity() * sizeof(double) + spots_.capacity() * sizeof(strict_pair) +
-                        lone_.capacity() + dropped_scratch_.bytes() + dropped_found_.capacity() * sizeof(dropped_pixel);
+                        dropped_scratch_.bytes() + dropped_found_.capacity() * sizeof(dropped_pixel);
         for (const auto& h : halves_)
             n += h.sd.capacity() * sizeof(float) + h.label.capacity() +
                  h.hist.bytes() + h.select_f.capacity() * sizeof(float) +
@@ -454,27 +454,19 @@ private:
     template <class C, class V, class A>
     void mark_dropped(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b, frame_report& rep) {
         const half_buffer<C, V, A>* hb[2] = {&a, &b};
-        const int w = a.color.width(), h = a.color.height(), nc = colour_channels(a.color.channels());
+        const int w = a.color.width(), h = a.color.height();
         for (half_state& s : halves_) s.dropped.clear();
         if (rep.half[0].ignored == 0 && rep.half[1].ignored == 0) return;
         const std::uint8_t* lab[2] = {halves_[0].label.data(), halves_[1].label.data()};
-        lone_.assign(halves_[0].label.size(), 0);
-        std::vector<std::uint8_t> any(static_cast<std::size_t>(h), 0);
-        exec_.run(static_cast<std::size_t>(h), [&](std::size_t yy) {
-            const int y = static_cast<int>(yy);
-            for (int x = 0; x < w; ++x) {
-                const std::size_t i = index(x, y, w);
-                for (int k = 0; k < 2; ++k) {
-                    if (cls(lab[k][i]) != static_cast<std::uint8_t>(pixel_class::ignored) || cls(lab[1 - k][i]) != valid_class)
-                        continue;
-                    bool black = true;
-                    for (int c = 0; c < nc; ++c) black = black && hb[k]->color.load(x, y, c) == 0;
-                    if (black) lone_[i] = static_cast<std::uint8_t>(k + 1), any[yy] = 1;
-                }
-            }
-        });
-        if (std::find(any.begin(), any.end(), 1) == any.end()) return;
-        (void)find_dropped(lone_.data(), w, h, 2, options_.alpha, dropped_scratch_, exec_, dropped_found_);
+        auto lone_at = [&](int x, int y) -> std::uint8_t {
+            const std::size_t i = index(x, y, w);
+            for (int k = 0; k < 2; ++k)
+                if (cls(lab[k][i]) == static_cast<std::uint8_t>(pixel_class::ignored) && cls(lab[1 - k][i]) == valid_class &&
+                    detail::colour_is_black(hb[k]->color, x, y))
+                    return static_cast<std::uint8_t>(k + 1);
+            return 0;
+        };
+        (void)find_dropped(w, h, 2, options_.alpha, lone_at, dropped_scratch_, exec_, dropped_found_);
         for (const dropped_pixel& d : dropped_found_) {
             half_state& s = halves_[d.buffer];
             s.label[d.pixel] = static_cast<std::uint8_t>((s.label[d.pixel] & ~pixel_class_bits) | nonfinite_class);
@@ -1243,7 +1235,6 @@ private:
     std::vector<std::uint32_t> pairs_;
     local_test_scratch local_scratch_;
     local_test_result local_result_;
-    std::vector<std::uint8_t> lone_;   // find_dropped: 1 + the half black alone at a pixel, or 0
     dropped_scratch dropped_scratch_;
     std::vector<dropped_pixel> dropped_found_;
     std::vector<double> frame_log_p_;  // the one-half fireflies' p-values (log), for the frame's level
