@@ -925,13 +925,17 @@ private:
     }
 
     // Row y's return (3 per pixel) added to every buffer alike, or to none where a sum does
-    // not fit a buffer's type.
+    // not fit a buffer's type. Where something was removed, at most that (the pixel's mean
+    // never ends above its input's: as in return_energy_to_image).
     template <class C, class V>
     void give_back_row(const buffer_view<C, V>* b, int k, int y, const double* returned) {
         const int w = b[0].color.width();
         const std::size_t row = static_cast<std::size_t>(y);
+        double capped[3];
         for (int x = 0; x < w; ++x) {
             const double* add = returned + static_cast<std::size_t>(x) * 3;
+            const double* removed = &excess_[index(x, y, w) * 3];
+            if (removed[0] > 0 || removed[1] > 0 || removed[2] > 0) add = detail::at_most(add, removed, capped);
             if (!(add[0] + add[1] + add[2] > 0)) continue;  // wherever positive (energy.hpp)
             double old[detail::max_buffers][3];
             bool fits = true;
