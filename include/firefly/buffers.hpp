@@ -81,9 +81,10 @@
 //       agree on it, the same amount to every buffer (energy.hpp).
 //   "NaN/Inf in a half are repaired"                   -> a buffer with NaN/Inf in colour or
 //       variance at a pixel is left out of the test and rebuilt like a firefly.
-//   "black pixels are ignored"                         -> unless one buffer alone is black where
-//       the others show it cannot be by chance (dropped.hpp, find_dropped): then it is left out
-//       of the test and rebuilt like a non-finite one (mask_bits::dropped, report.dropped).
+//   "black pixels are ignored"                         -> unless some buffers are black (one, or
+//       several: a tile that failed in two renders) where the others show it cannot be by
+//       chance (dropped.hpp, find_dropped): then they are left out of the test and rebuilt like
+//       non-finite ones (mask_bits::dropped, report.dropped).
 //   "bad in both halves: spatial reconstruction"       -> a pixel with more than floor(K / 2)
 //       non-finite buffers is left as it is and counted (report.left, error no_valid_pixels);
 //       its non-finite buffers' masks say nonfinite | left (found, not repaired), the others 0.
@@ -376,7 +377,7 @@ public:
     std::size_t scratch_bytes() const noexcept {
         return (noise_.capacity() + log_p_.capacity() + excess_.capacity()) *
                    sizeof(double) + level_.capacity() * sizeof(float) + refined_.capacity() +
-               dropped_at_.capacity() + dropped_scratch_.bytes() +
+               dropped_at_.capacity() * sizeof(std::uint64_t) + dropped_scratch_.bytes() +
                dropped_found_.capacity() * sizeof(dropped_pixel) +
                energy_.bytes() + pair_.scratch_bytes();
     }
@@ -601,40 +602,41 @@ private:
     template <class C, class V>
     void gather(const buffer_view<C, V>* b, int k, int x, int y, bool has_var, detail::pixel_buffers& p) const {
         for (int i = 0; i < k; ++i) read_buffer(b[i], x, y, has_var, i, p);
-        const int d = dropped_buffer(x, y, b[0].color.width());
-        if (d >= 0) p.finite[static_cast<std::size_t>(d)] = false, p.flagged[static_cast<std::size_t>(d)] = true;
+        const std::uint64_t d = dropped_buffers(x, y, b[0].color.width());
+        for (int i = 0; i < k; ++i)
+            if ((d >> i) & 1u) p.finite[static_cast<std::size_t>(i)] = false, p.flagged[static_cast<std::size_t>(i)] = true;
         sort_buffers(b, x, y, p);
     }
 
-    // The buffer found dropped at (x, y), or -1.
-    int dropped_buffer(int x, int y, int w) const noexcept {
-        return dropped_at_.empty() ? -1 : static_cast<int>(dropped_at_[index(x, y, w)]) - 1;
+    // The buffers found dropped at (x, y): bit i for buffer i (0: none).
+    std::uint64_t dropped_buffers(int x, int y, int w) const noexcept {
+        return dropped_at_.empty() ? 0 : dropped_at_[index(x, y, w)];
     }
 
-    // find_dropped (dropped.hpp): a lone black is a pixel where exactly one buffer is black
-    // (its colour channels 0) and every other one finite and not black; those the window test
-    // finds are marked in dropped_at_ (empty: none).
+    // find_dropped (dropped.hpp): a partly black pixel is one where some buffers are black
+    // (their colour channels 0) and every other one finite and not black (a lone black: one
+    // buffer); those the window test finds are marked in dropped_at_ (empty: none).
     template <class C, class V>
     void find_dropped_buffers(const buffer_view<C, V>* b, int k, bool has_var) {
         dropped_at_.clear();
         if (!options_.find_dropped) return;
         const int w = b[0].color.width(), h = b[0].color.height();
-        auto lone_at = [&](int x, int y) -> std::uint8_t {
-            int black = -1, blacks = 0;
-            for (int i = 0; i < k && blacks < 2; ++i)
-                if (detail::colour_is_black(b[i].color, x, y)) black = i, ++blacks;
-            if (blacks != 1) return 0;
+        auto black_at = [&](int x, int y) -> std::uint64_t {
+            std::uint64_t black = 0;
+            for (int i = 0; i < k; ++i)
+                if (detail::colour_is_black(b[i].color, x, y)) black |= std::uint64_t{1} << i;
+            if (black == 0 || black == (k == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << k) - 1)) return 0;
             detail::pixel_buffers p;  // every buffer finite (colour and variance)
             for (int i = 0; i < k; ++i) {
                 read_buffer(b[i], x, y, has_var, i, p);
                 if (!p.finite[static_cast<std::size_t>(i)]) return 0;
             }
-            return static_cast<std::uint8_t>(black + 1);
+            return black;
         };
-        (void)find_dropped(w, h, k, options_.alpha, lone_at, dropped_scratch_, exec_, dropped_found_);
+        (void)find_dropped(w, h, k, options_.alpha, black_at, dropped_scratch_, exec_, dropped_found_);
         if (dropped_found_.empty()) return;
         dropped_at_.assign(static_cast<std::size_t>(w) * static_cast<std::size_t>(h), 0);
-        for (const dropped_pixel& d : dropped_found_) dropped_at_[d.pixel] = static_cast<std::uint8_t>(d.buffer + 1);
+        for (const dropped_pixel& d : dropped_found_) dropped_at_[d.pixel] |= std::uint64_t{1} << d.buffer;
     }
 
     // Pass 1: every pixel's own noise and level (before anything is rebuilt; NaN where they
@@ -827,10 +829,10 @@ private:
             const bool kept = f.log_p < 0 && f.log_p <= frame_log_p_;
             const pooled pn = kept ? pooled_noise(x, y, w, b[0].color.height(), k, with_var, own_rest(p, with_var)) : pooled{};
             const int flags = kept ? detail::judge_pixel(p, pn.noise, with_var, frame_.at(pn.n)) : 0;
-            const bool dropped = dropped_buffer(x, y, w) >= 0;
+            const int dropped = detail::blacks_in(dropped_buffers(x, y, w));
             rc.fireflies += static_cast<std::size_t>(flags);
-            rc.nonfinite += static_cast<std::size_t>(bad - (dropped ? 1 : 0));
-            rc.dropped += dropped ? 1 : 0;
+            rc.nonfinite += static_cast<std::size_t>(bad - dropped);
+            rc.dropped += static_cast<std::size_t>(dropped);
             for (int i = 0; i < k; ++i) rc.per_buffer[static_cast<std::size_t>(i)] += p.flagged[static_cast<std::size_t>(i)];
             write_masks(masks, p, x, y);
             if (clean && (flags > 0 || bad > 0)) rebuild(b, p, x, y, has_var, excess_.empty() ? nullptr : &excess_[index(x, y, w) * 3]);
@@ -846,13 +848,13 @@ private:
 
     void write_masks(const image_view<std::uint8_t>* masks, const detail::pixel_buffers& p, int x, int y) const {
         if (!masks) return;
-        const int d = dropped_buffer(x, y, masks[0].width());
+        const std::uint64_t d = dropped_buffers(x, y, masks[0].width());
         for (int i = 0; i < p.k; ++i) {
             const std::size_t s = static_cast<std::size_t>(i);
-            masks[i](x, y) = !p.flagged[s] ? 0
-                             : p.finite[s] ? mask_bits::firefly
-                             : i == d      ? mask_bits::dropped
-                                           : mask_bits::nonfinite;
+            masks[i](x, y) = !p.flagged[s]     ? 0
+                             : p.finite[s]     ? mask_bits::firefly
+                             : (d >> i) & 1u   ? mask_bits::dropped
+                                               : mask_bits::nonfinite;
         }
     }
 
@@ -960,7 +962,7 @@ private:
     std::vector<float> level_;   // per pixel: lower_level, its buffers' lower half (NaN: none usable)
     std::vector<std::uint8_t> refined_;  // per pixel: its noise pooled without the buffers flagged at the cap
     std::vector<double> excess_;        // energy return: what was removed, 3 channels per pixel
-    std::vector<std::uint8_t> dropped_at_;  // 1 + the buffer found dropped at a pixel, or 0 (empty: none)
+    std::vector<std::uint64_t> dropped_at_;  // the buffers found dropped at a pixel, bit i buffer i (empty: none)
     dropped_scratch dropped_scratch_;
     std::vector<dropped_pixel> dropped_found_;
 

@@ -23,9 +23,22 @@
 // K = 2). Lone blacks of the same buffer within the radius of a dropped region share windows
 // with it and are found with it (a legitimately black pixel there takes the other buffers'
 // value: a halo at most `radius` wide, as dense as the lone blacks around the region).
-// Not found: a region dropped in every buffer alike (it is black background to any test), a
-// region smaller than a few pixels (indistinguishable from chance), and pixels of the region
-// where another buffer is black too (K >= 3; not a lone black).
+// K >= 3: more than one buffer can be black at a pixel (a tile that failed in two renders, or
+// two failed tiles that overlap). A "partly black" pixel has j of its K buffers black,
+// 1 <= j <= K - 1, the others finite and not black; exchangeability makes each buffer one of
+// its j black ones with probability j / K. Around a partly black pixel and for each buffer k
+// black there, n counts the window's partly black pixels and a those where k is black; each
+// of the other n - 1, with j_q black buffers, is k's with probability j_q / K, independently:
+// a - 1 is a Poisson-binomial count. Where every partly
+// black pixel of the window is a lone black, that is the binomial above, exact. Elsewhere,
+// with pbar the mean of the j_q / K, Hoeffding (1956, theorem 4) bounds its upper tail by the
+// binomial's of the same mean,
+//     P(a - 1 >= c) <= P(Binomial(n - 1, pbar) >= c)   for c >= (n - 1) pbar + 1,
+// a valid p-value (1 below that point, far from any decision). Bonferroni's level is then over
+// the m (pixel, black buffer) pairs. A tile black in the same two of eight renders: a = n,
+// p = (1/4)^(n - 1), 2^-48 for a 5x5 region.
+// Not found: a region dropped in every buffer alike (it is black background to any test), and
+// a region smaller than a few pixels (indistinguishable from chance).
 // The window is symmetric and every count is an integer: a flipped or transposed frame gives
 // the flipped or transposed result, and the result does not depend on the executor.
 #pragma once
@@ -42,7 +55,8 @@
 
 namespace firefly {
 
-// A dropped pixel: `pixel` (row-major index) is black in buffer `buffer` alone, and found.
+// A dropped pixel: `pixel` (row-major index) is black in buffer `buffer` (alone, or with
+// others: K >= 3), and found.
 struct dropped_pixel {
     std::uint32_t pixel = 0;
     int buffer = 0;
@@ -91,6 +105,7 @@ public:
         }
     }
     double log_tail(int n, int a) const noexcept { return tail_[row_[static_cast<std::size_t>(n)] + static_cast<std::size_t>(a)]; }
+    std::size_t bytes() const noexcept { return row_.capacity() * sizeof(std::size_t) + tail_.capacity() * sizeof(double); }
 
 private:
     int k_ = 0, n_max_ = -1;
@@ -98,49 +113,142 @@ private:
     std::vector<double> tail_;
 };
 
+// The index of the lowest set bit of m (m != 0).
+template <class Mask>
+int lowest_bit(Mask m) noexcept {
+    int b = 0;
+    while (((m >> b) & 1u) == 0) ++b;
+    return b;
+}
+
+// log P(Binomial(n, p) >= c) for c >= n p + 1 (so the terms fall from c on), 0 < p < 1,
+// n <= the table's size: the terms summed in log space until they stop adding to a double.
+inline double log_binomial_upper_tail(int n, int c, double p, const std::vector<double>& log_factorial) noexcept {
+    if (c <= 0) return 0.0;
+    if (c > n) return -HUGE_VAL;
+    const double lp = std::log(p), lq = std::log1p(-p), odds = lp - lq;
+    double term = log_factorial[static_cast<std::size_t>(n)] - log_factorial[static_cast<std::size_t>(c)] -
+                  log_factorial[static_cast<std::size_t>(n - c)] + c * lp + (n - c) * lq;
+    double acc = term;
+    for (int t = c; t < n; ++t) {
+        term += std::log(static_cast<double>(n - t) / (t + 1)) + odds;
+        if (term < acc - 40.0) break;  // e^-40: below a double's precision of the sum
+        acc += std::log1p(std::exp(term - acc));
+    }
+    return std::min(acc, 0.0);
+}
+
+// The number of set bits of each byte value.
+struct byte_counts {
+    unsigned char n[256] = {};
+    constexpr byte_counts() {
+        for (int v = 1; v < 256; ++v) n[v] = static_cast<unsigned char>(n[v >> 1] + (v & 1));
+    }
+};
+inline constexpr byte_counts bits_in_byte{};
+
+// The number of buffers black in a mask.
+template <class Mask>
+int blacks_in(Mask m) noexcept {
+    int n = 0;
+    for (std::size_t i = 0; i < sizeof(Mask); ++i) n += bits_in_byte.n[static_cast<unsigned>(m >> (8 * i)) & 255u];
+    return n;
+}
+
 }  // namespace detail
 
 // Work memory of find_dropped, kept between frames.
 struct dropped_scratch {
-    detail::binomial_tail_table table;
-    std::vector<std::uint8_t> lone;                // the lone blacks (find_dropped with lone_at)
-    std::vector<std::vector<dropped_pixel>> rows;  // candidates per row
+    detail::binomial_tail_table table;                // at probability 1 / K (lone blacks)
+    std::vector<double> log_factorial;                // log i!, i up to the window's size
+    std::vector<std::uint8_t> lone;                   // black-buffer masks, K <= 8
+    std::vector<std::uint64_t> wide;                  // black-buffer masks, K > 8
+    std::vector<std::vector<dropped_pixel>> rows;     // candidates per row
     std::size_t bytes() const noexcept {
-        std::size_t n = lone.capacity() + rows.capacity() * sizeof(std::vector<dropped_pixel>);
+        std::size_t n = lone.capacity() + wide.capacity() * sizeof(std::uint64_t) +
+                        rows.capacity() * sizeof(std::vector<dropped_pixel>);
         for (const auto& r : rows) n += r.capacity() * sizeof(dropped_pixel);
-        return n;
+        return n + table.bytes() + log_factorial.capacity() * sizeof(double);
     }
 };
 
-// The dropped pixels of a w x h frame of k buffers (k >= 2), row-major into `out`. lone[p]:
-// 0 where no buffer is a lone black, else 1 + the buffer that is. alpha: the frame's promise
-// (Bonferroni's level over the lone blacks). Returns the number of lone blacks tested.
-inline std::size_t find_dropped(const std::uint8_t* lone, int w, int h, int k, double alpha, dropped_scratch& s,
-                                const executor& exec, std::vector<dropped_pixel>& out) {
-    out.clear();
-    constexpr int r = detail::dropped_radius;
-    s.table.build(k, (2 * r + 1) * (2 * r + 1) - 1);
-    s.rows.resize(static_cast<std::size_t>(h));
-    exec.run(static_cast<std::size_t>(h), [&](std::size_t yy) {
-        const int y = static_cast<int>(yy);
-        std::vector<dropped_pixel>& row = s.rows[yy];
-        row.clear();
-        const std::uint8_t* here = lone + static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
-        for (int x = 0; x < w; ++x) {
-            if (here[x] == 0) continue;
-            int n = 0, a = 0;
-            for (int j = std::max(0, y - r); j <= std::min(h - 1, y + r); ++j) {
-                const std::uint8_t* l = lone + static_cast<std::size_t>(j) * static_cast<std::size_t>(w);
-                for (int i = std::max(0, x - r); i <= std::min(w - 1, x + r); ++i) {
-                    n += l[i] != 0;
-                    a += l[i] == here[x];
+namespace detail {
+
+// The p-value (log) of c of the n other partly black pixels of a window having buffer k black,
+// `blacks` the black buffers they hold in all: the lone-black binomial where they are all lone
+// blacks (blacks = n), Hoeffding's bound otherwise.
+inline double window_log_p(int n, int c, int blacks, int k, const dropped_scratch& s) noexcept {
+    if (blacks == n) return s.table.log_tail(n, c);
+    const double pbar = static_cast<double>(blacks) / (static_cast<double>(k) * n);
+    if (!(c >= n * pbar + 1.0)) return 0.0;
+    return log_binomial_upper_tail(n, c, std::min(pbar, 1.0 - 1.0 / k), s.log_factorial);
+}
+
+// The p-values of every (partly black pixel, black buffer) of row y: black[p] is the mask of
+// the buffers black at p (0: none, or not partly black), r the window's radius.
+template <class Mask>
+void dropped_row(const Mask* black, int w, int h, int y, int r, int k, const dropped_scratch& s,
+                 std::vector<dropped_pixel>& row) {
+    row.clear();
+    const Mask* here = black + static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
+    int a[64];
+    for (int x = 0; x < w; ++x) {
+        const Mask m = here[x];
+        if (m == 0) continue;
+        int n = 0, blacks = 0;  // partly black pixels in the window; the others' black buffers
+        for (Mask rest = m; rest != 0; rest = static_cast<Mask>(rest & (rest - 1))) a[lowest_bit(rest)] = 0;
+        const bool lone = (m & (m - 1)) == 0;  // one buffer black here: the common case
+        const int only = lowest_bit(m);
+        for (int j = std::max(0, y - r); j <= std::min(h - 1, y + r); ++j) {
+            const Mask* l = black + static_cast<std::size_t>(j) * static_cast<std::size_t>(w);
+            const int i0 = std::max(0, x - r), i1 = std::min(w - 1, x + r);
+            if (lone) {  // branch-free: a 0 mask adds nothing; several buffers: counted apart
+                int nn = 0, aa = 0;
+                Mask several = 0;
+                for (int i = i0; i <= i1; ++i) {
+                    nn += l[i] != 0;
+                    aa += static_cast<int>((l[i] >> only) & 1u);
+                    several = static_cast<Mask>(several | (l[i] & static_cast<Mask>(l[i] - 1)));
+                }
+                n += nn, a[only] += aa, blacks += nn;
+                if (several != 0)
+                    for (int i = i0; i <= i1; ++i) blacks += blacks_in(l[i]) - (l[i] != 0);
+                continue;
+            }
+            for (int i = i0; i <= i1; ++i) {
+                if (l[i] == 0) continue;
+                ++n;
+                blacks += blacks_in(l[i]);
+                for (Mask rest = m; rest != 0; rest = static_cast<Mask>(rest & (rest - 1))) {
+                    const int b = lowest_bit(rest);
+                    a[b] += static_cast<int>((l[i] >> b) & 1u);
                 }
             }
-            const std::uint32_t p = static_cast<std::uint32_t>(static_cast<std::size_t>(y) * static_cast<std::size_t>(w) +
-                                                               static_cast<std::size_t>(x));
-            row.push_back({p, here[x] - 1, s.table.log_tail(n - 1, a - 1)});
         }
-    });
+        blacks -= blacks_in(m);
+        const std::uint32_t p = static_cast<std::uint32_t>(static_cast<std::size_t>(y) * static_cast<std::size_t>(w) +
+                                                           static_cast<std::size_t>(x));
+        for (Mask rest = m; rest != 0; rest = static_cast<Mask>(rest & (rest - 1))) {
+            const int b = lowest_bit(rest);
+            row.push_back({p, b, window_log_p(n - 1, a[b] - 1, blacks, k, s)});
+        }
+    }
+}
+
+// The dropped pixels from the black-buffer masks of a w x h frame of k buffers.
+template <class Mask>
+std::size_t find_dropped_masks(const Mask* black, int w, int h, int k, double alpha, dropped_scratch& s,
+                               const executor& exec, std::vector<dropped_pixel>& out) {
+    out.clear();
+    constexpr int r = dropped_radius, n_max = (2 * r + 1) * (2 * r + 1) - 1;
+    s.table.build(k, n_max);
+    if (s.log_factorial.size() != static_cast<std::size_t>(n_max + 1)) {
+        s.log_factorial.assign(static_cast<std::size_t>(n_max + 1), 0.0);
+        for (int i = 1; i <= n_max; ++i)
+            s.log_factorial[static_cast<std::size_t>(i)] = s.log_factorial[static_cast<std::size_t>(i - 1)] + std::log(static_cast<double>(i));
+    }
+    s.rows.resize(static_cast<std::size_t>(h));
+    exec.run(static_cast<std::size_t>(h), [&](std::size_t y) { dropped_row(black, w, h, static_cast<int>(y), r, k, s, s.rows[y]); });
     std::size_t tested = 0;
     for (const auto& row : s.rows) tested += row.size();
     if (tested == 0) return 0;
@@ -151,24 +259,53 @@ inline std::size_t find_dropped(const std::uint8_t* lone, int w, int h, int k, d
     return tested;
 }
 
-// The same, the lone blacks given by lone_at(x, y) (0, or 1 + the buffer black alone at the
-// pixel), taken row by row across the executor into s.lone; no window pass where none is.
-template <class LoneAt>
-std::size_t find_dropped(int w, int h, int k, double alpha, LoneAt&& lone_at, dropped_scratch& s, const executor& exec,
-                         std::vector<dropped_pixel>& out) {
+// The masks black_at(x, y) gives (a std::uint64_t, bit i: buffer i black; 0 unless partly
+// black) into `masks` across the executor; returns whether any pixel is partly black.
+template <class Mask, class BlackAt>
+bool fill_black_masks(int w, int h, BlackAt&& black_at, std::vector<Mask>& masks, const executor& exec) {
     const std::size_t row = static_cast<std::size_t>(w);
-    s.lone.resize(row * static_cast<std::size_t>(h));
+    masks.resize(row * static_cast<std::size_t>(h));
     std::vector<std::uint8_t> any(static_cast<std::size_t>(h), 0);
     exec.run(static_cast<std::size_t>(h), [&](std::size_t y) {
         for (int x = 0; x < w; ++x) {
-            const std::uint8_t l = lone_at(x, static_cast<int>(y));
-            s.lone[y * row + static_cast<std::size_t>(x)] = l;
-            any[y] = any[y] || l != 0;
+            const Mask m = static_cast<Mask>(black_at(x, static_cast<int>(y)));
+            masks[y * row + static_cast<std::size_t>(x)] = m;
+            any[y] = any[y] || m != 0;
         }
     });
+    return std::find(any.begin(), any.end(), std::uint8_t{1}) != any.end();
+}
+
+}  // namespace detail
+
+// The dropped pixels of a w x h frame of k buffers (2 <= k <= 64), row-major into `out`, the
+// black buffers given by black_at(x, y): a std::uint64_t whose bit i is set where buffer i is
+// black at a partly black pixel (some buffers black, the others finite and not black), 0
+// elsewhere; taken row by row across the executor, no window pass where there is none.
+// alpha: the frame's promise (Bonferroni's level over the pairs). Returns the pairs tested.
+template <class BlackAt>
+std::size_t find_dropped(int w, int h, int k, double alpha, BlackAt&& black_at, dropped_scratch& s, const executor& exec,
+                         std::vector<dropped_pixel>& out) {
     out.clear();
-    if (std::find_if(any.begin(), any.end(), [](std::uint8_t a) { return a != 0; }) == any.end()) return 0;
-    return find_dropped(s.lone.data(), w, h, k, alpha, s, exec, out);
+    if (k <= 8)
+        return detail::fill_black_masks(w, h, black_at, s.lone, exec)
+                   ? detail::find_dropped_masks(s.lone.data(), w, h, k, alpha, s, exec, out)
+                   : 0;
+    return detail::fill_black_masks(w, h, black_at, s.wide, exec)
+               ? detail::find_dropped_masks(s.wide.data(), w, h, k, alpha, s, exec, out)
+               : 0;
+}
+
+// The same for a frame whose partly black pixels are all lone blacks: lone[p] 0 where no
+// buffer is, else 1 + the buffer that is.
+inline std::size_t find_dropped(const std::uint8_t* lone, int w, int h, int k, double alpha, dropped_scratch& s,
+                                const executor& exec, std::vector<dropped_pixel>& out) {
+    const std::size_t row = static_cast<std::size_t>(w);
+    auto black_at = [&](int x, int y) -> std::uint64_t {
+        const std::uint8_t l = lone[static_cast<std::size_t>(y) * row + static_cast<std::size_t>(x)];
+        return l == 0 ? 0 : std::uint64_t{1} << (l - 1);
+    };
+    return find_dropped(w, h, k, alpha, black_at, s, exec, out);
 }
 
 }  // namespace firefly

@@ -458,15 +458,15 @@ private:
         for (half_state& s : halves_) s.dropped.clear();
         if (rep.half[0].ignored == 0 && rep.half[1].ignored == 0) return;
         const std::uint8_t* lab[2] = {halves_[0].label.data(), halves_[1].label.data()};
-        auto lone_at = [&](int x, int y) -> std::uint8_t {
+        auto black_at = [&](int x, int y) -> std::uint64_t {
             const std::size_t i = index(x, y, w);
             for (int k = 0; k < 2; ++k)
                 if (cls(lab[k][i]) == static_cast<std::uint8_t>(pixel_class::ignored) && cls(lab[1 - k][i]) == valid_class &&
                     detail::colour_is_black(hb[k]->color, x, y))
-                    return static_cast<std::uint8_t>(k + 1);
+                    return std::uint64_t{1} << k;
             return 0;
         };
-        (void)find_dropped(w, h, 2, options_.alpha, lone_at, dropped_scratch_, exec_, dropped_found_);
+        (void)find_dropped(w, h, 2, options_.alpha, black_at, dropped_scratch_, exec_, dropped_found_);
         for (const dropped_pixel& d : dropped_found_) {
             half_state& s = halves_[d.buffer];
             s.label[d.pixel] = static_cast<std::uint8_t>((s.label[d.pixel] & ~pixel_class_bits) | nonfinite_class);
