@@ -274,6 +274,38 @@ TEST_CASE("find_dropped: flips, transposes and executors give the same pixels", 
         }
 }
 
+// The same with several buffers black at a pixel (K = 8: masks of 1 to 3 buffers, a block
+// black in two).
+TEST_CASE("find_dropped, several buffers black: flips, transposes and executors give the same pairs", "[dropped]") {
+    const int w = 64, h = 41, k = 8;
+    std::vector<std::uint64_t> black = null_black_map(w, h, k, 3, 0.25, 11u);
+    for (int y = 4; y < 30; ++y)
+        for (int x = 6; x < 18 + y / 2; ++x) black[pixel(x, y, w)] = 0x24;  // buffers 2 and 5
+    auto found = [&](const std::vector<std::uint64_t>& m, int ww, int hh, const executor& e) {
+        dropped_scratch s;
+        std::vector<dropped_pixel> f;
+        (void)find_dropped(ww, hh, k, 0.05, [&](int x, int y) { return m[pixel(x, y, ww)]; }, s, e, f);
+        std::vector<std::uint64_t> out(m.size(), 0);
+        for (const dropped_pixel& d : f) out[d.pixel] |= std::uint64_t{1} << d.buffer;
+        return out;
+    };
+    const std::vector<std::uint64_t> base = found(black, w, h, executor{});
+    CHECK(std::count(base.begin(), base.end(), std::uint64_t{0x24}) > 300);
+    CHECK(found(black, w, h, executor::threads(2)) == base);
+    std::vector<std::uint64_t> flipped(black.size()), transposed(black.size());
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            flipped[pixel(x, h - 1 - y, w)] = black[pixel(x, y, w)];
+            transposed[pixel(y, x, h)] = black[pixel(x, y, w)];
+        }
+    const std::vector<std::uint64_t> f = found(flipped, w, h, executor{}), t = found(transposed, h, w, executor{});
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            REQUIRE(f[pixel(x, h - 1 - y, w)] == base[pixel(x, y, w)]);
+            REQUIRE(t[pixel(y, x, h)] == base[pixel(x, y, w)]);
+        }
+}
+
 TEST_CASE("a bucket written black in half A is rebuilt from half B", "[dropped][pipeline]") {
     const sim::scene sc = sim::named_scene("dropped_bucket", 256, 192, 6);
     sim::scene intact_sc = sc;
