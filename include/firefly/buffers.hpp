@@ -88,6 +88,8 @@
 //   "bad in both halves: spatial reconstruction"       -> a pixel with more than floor(K / 2)
 //       non-finite buffers is left as it is and counted (report.left, error no_valid_pixels);
 //       its non-finite buffers' masks say nonfinite | left (found, not repaired), the others 0.
+//       Buffers found dropped do not count: the others are known good, and the pixel is rebuilt
+//       from them however few (a tile black in two of three renders takes the third's value).
 //   K = 2 is the paper's method: the two buffers go to firefly::detector unchanged (variance
 //       required), with its global ESD, highlight check and spatial reconstruction.
 // Variance: that of each buffer's mean (accumulator.hpp gives it). Required for K = 2;
@@ -376,7 +378,7 @@ public:
     // Work memory kept between frames, bytes (the K = 2 detector's included).
     std::size_t scratch_bytes() const noexcept {
         return (noise_.capacity() + log_p_.capacity() + excess_.capacity()) *
-                   sizeof(double) + level_.capacity() * sizeof(float) + refined_.capacity() +
+                   sizeof(double) + level_.capacity() * sizeof(float) + refined_.capacity() + untested_.capacity() +
                dropped_at_.capacity() * sizeof(std::uint64_t) + dropped_scratch_.bytes() +
                dropped_found_.capacity() * sizeof(dropped_pixel) +
                energy_.bytes() + pair_.scratch_bytes();
@@ -474,8 +476,8 @@ private:
         const int h = b[0].color.height();
         noise_.resize(rep.pixels);
         level_.resize(rep.pixels);
-        if (returns_energy(b, k, clean)) excess_.assign(rep.pixels * 3, 0.0);
-        else excess_.clear();
+        if (returns_energy(b, k, clean)) excess_.assign(rep.pixels * 3, 0.0), untested_.assign(rep.pixels, 0);
+        else excess_.clear(), untested_.clear();
         find_dropped_buffers(b, k, has_var);
         exec_.run(static_cast<std::size_t>(h), [&](std::size_t y) {
             noise_row(b, k, has_var, with_var, static_cast<int>(y));
@@ -633,7 +635,7 @@ private:
             }
             return black;
         };
-        (void)find_dropped(w, h, k, options_.alpha, black_at, dropped_scratch_, exec_, dropped_found_);
+        (void)find_dropped_masks(w, h, k, options_.alpha, black_at, dropped_scratch_, exec_, dropped_found_);
         if (dropped_found_.empty()) return;
         dropped_at_.assign(static_cast<std::size_t>(w) * static_cast<std::size_t>(h), 0);
         for (const dropped_pixel& d : dropped_found_) dropped_at_[d.pixel] |= std::uint64_t{1} << d.buffer;
@@ -767,9 +769,12 @@ private:
             }
             gather(b, k, x, y, has_var, p);
             const int bad = k - p.usable;
-            if (bad > k / 2) {  // left as it is: its non-finite buffers say so
+            // left as it is where more than half are non-finite (its masks say so); buffers found
+            // dropped are known black and the others known good: rebuilt from those
+            if (bad - detail::blacks_in(dropped_buffers(x, y, w)) > k / 2 || p.usable == 0) {
                 rc.left += before ? 0 : 1;
                 write_left_masks(masks, p, x, y);
+                if (!untested_.empty()) untested_[index(x, y, w)] = 1;
                 continue;
             }
             const pooled pn = pooled_noise(x, y, w, h, k, with_var, own_rest(p, with_var));
@@ -835,15 +840,20 @@ private:
             rc.dropped += static_cast<std::size_t>(dropped);
             for (int i = 0; i < k; ++i) rc.per_buffer[static_cast<std::size_t>(i)] += p.flagged[static_cast<std::size_t>(i)];
             write_masks(masks, p, x, y);
+            if (!untested_.empty() && p.usable < 3) untested_[index(x, y, w)] = 1;
             if (clean && (flags > 0 || bad > 0)) rebuild(b, p, x, y, has_var, excess_.empty() ? nullptr : &excess_[index(x, y, w) * 3]);
         }
     }
 
-    // A pixel left as it is (more than K / 2 non-finite buffers): nonfinite | left on those.
-    static void write_left_masks(const image_view<std::uint8_t>* masks, const detail::pixel_buffers& p, int x, int y) {
-        constexpr std::uint8_t found_left = mask_bits::nonfinite | mask_bits::left;
-        for (int i = 0; masks && i < p.k; ++i)
-            masks[i](x, y) = p.finite[static_cast<std::size_t>(i)] ? std::uint8_t{0} : found_left;
+    // A pixel left as it is (more than K / 2 non-finite or dropped buffers): nonfinite | left,
+    // or dropped | left, on those.
+    void write_left_masks(const image_view<std::uint8_t>* masks, const detail::pixel_buffers& p, int x, int y) const {
+        if (!masks) return;
+        const std::uint64_t d = dropped_buffers(x, y, masks[0].width());
+        for (int i = 0; i < p.k; ++i)
+            masks[i](x, y) = p.finite[static_cast<std::size_t>(i)] ? std::uint8_t{0}
+                             : (d >> i) & 1u ? static_cast<std::uint8_t>(mask_bits::dropped | mask_bits::left)
+                                             : static_cast<std::uint8_t>(mask_bits::nonfinite | mask_bits::left);
     }
 
     void write_masks(const image_view<std::uint8_t>* masks, const detail::pixel_buffers& p, int x, int y) const {
@@ -928,7 +938,10 @@ private:
 
     // Row y's return (3 per pixel) added to every buffer alike, or to none where a sum does
     // not fit a buffer's type. Where something was removed, at most that (the pixel's mean
-    // never ends above its input's: as in return_energy_to_image).
+    // ends above its input's by float rounding at most: as in return_energy_to_image); none where fewer than 3
+    // buffers were usable, whose own fireflies could not be told apart and are all still there
+    // (at K = 4, a tile black in two renders came out 1.44x its expected light on the simulated
+    // caustics).
     template <class C, class V>
     void give_back_row(const buffer_view<C, V>* b, int k, int y, const double* returned) {
         const int w = b[0].color.width();
@@ -939,6 +952,7 @@ private:
             const double* removed = &excess_[index(x, y, w) * 3];
             if (removed[0] > 0 || removed[1] > 0 || removed[2] > 0) add = detail::at_most(add, removed, capped);
             if (!(add[0] + add[1] + add[2] > 0)) continue;  // wherever positive (energy.hpp)
+            if (untested_[index(x, y, w)]) continue;  // its own fireflies could not be told: none removed
             double old[detail::max_buffers][3];
             bool fits = true;
             for (int i = 0; i < k; ++i) fits = add_light(b[i].color, x, y, add, old[i]) && fits;
@@ -962,6 +976,8 @@ private:
     std::vector<float> level_;   // per pixel: lower_level, its buffers' lower half (NaN: none usable)
     std::vector<std::uint8_t> refined_;  // per pixel: its noise pooled without the buffers flagged at the cap
     std::vector<double> excess_;        // energy return: what was removed, 3 channels per pixel
+    std::vector<std::uint8_t> untested_;  // energy return: pixels with fewer than 3 usable buffers
+                                          // (left, or rebuilt without a test): none given back
     std::vector<std::uint64_t> dropped_at_;  // the buffers found dropped at a pixel, bit i buffer i (empty: none)
     dropped_scratch dropped_scratch_;
     std::vector<dropped_pixel> dropped_found_;

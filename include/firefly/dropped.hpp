@@ -179,9 +179,8 @@ namespace detail {
 // blacks (blacks = n), Hoeffding's bound otherwise.
 inline double window_log_p(int n, int c, int blacks, int k, const dropped_scratch& s) noexcept {
     if (blacks == n) return s.table.log_tail(n, c);
-    const double pbar = static_cast<double>(blacks) / (static_cast<double>(k) * n);
-    if (!(c >= n * pbar + 1.0)) return 0.0;
-    return log_binomial_upper_tail(n, c, std::min(pbar, 1.0 - 1.0 / k), s.log_factorial);
+    if (c * k < blacks + k) return 0.0;  // c < n pbar + 1, in integers: no bound there (p <= 1)
+    return log_binomial_upper_tail(n, c, static_cast<double>(blacks) / (static_cast<double>(k) * n), s.log_factorial);
 }
 
 // The p-values of every (partly black pixel, black buffer) of row y: black[p] is the mask of
@@ -237,7 +236,7 @@ void dropped_row(const Mask* black, int w, int h, int y, int r, int k, const dro
 
 // The dropped pixels from the black-buffer masks of a w x h frame of k buffers.
 template <class Mask>
-std::size_t find_dropped_masks(const Mask* black, int w, int h, int k, double alpha, dropped_scratch& s,
+std::size_t find_dropped_in(const Mask* black, int w, int h, int k, double alpha, dropped_scratch& s,
                                const executor& exec, std::vector<dropped_pixel>& out) {
     out.clear();
     constexpr int r = dropped_radius, n_max = (2 * r + 1) * (2 * r + 1) - 1;
@@ -284,28 +283,37 @@ bool fill_black_masks(int w, int h, BlackAt&& black_at, std::vector<Mask>& masks
 // elsewhere; taken row by row across the executor, no window pass where there is none.
 // alpha: the frame's promise (Bonferroni's level over the pairs). Returns the pairs tested.
 template <class BlackAt>
-std::size_t find_dropped(int w, int h, int k, double alpha, BlackAt&& black_at, dropped_scratch& s, const executor& exec,
-                         std::vector<dropped_pixel>& out) {
+std::size_t find_dropped_masks(int w, int h, int k, double alpha, BlackAt&& black_at, dropped_scratch& s,
+                               const executor& exec, std::vector<dropped_pixel>& out) {
     out.clear();
     if (k <= 8)
         return detail::fill_black_masks(w, h, black_at, s.lone, exec)
-                   ? detail::find_dropped_masks(s.lone.data(), w, h, k, alpha, s, exec, out)
+                   ? detail::find_dropped_in(s.lone.data(), w, h, k, alpha, s, exec, out)
                    : 0;
     return detail::fill_black_masks(w, h, black_at, s.wide, exec)
-               ? detail::find_dropped_masks(s.wide.data(), w, h, k, alpha, s, exec, out)
+               ? detail::find_dropped_in(s.wide.data(), w, h, k, alpha, s, exec, out)
                : 0;
 }
 
-// The same for a frame whose partly black pixels are all lone blacks: lone[p] 0 where no
-// buffer is, else 1 + the buffer that is.
+// The same for a frame whose partly black pixels are all lone blacks, given by lone_at(x, y):
+// 0 where no buffer is, else 1 + the buffer that is (a value past k counts as 0).
+template <class LoneAt>
+std::size_t find_dropped(int w, int h, int k, double alpha, LoneAt&& lone_at, dropped_scratch& s, const executor& exec,
+                         std::vector<dropped_pixel>& out) {
+    auto black_at = [&](int x, int y) -> std::uint64_t {
+        const int l = static_cast<int>(lone_at(x, y));
+        return l >= 1 && l <= k && l <= 64 ? std::uint64_t{1} << (l - 1) : 0;
+    };
+    return find_dropped_masks(w, h, k, alpha, black_at, s, exec, out);
+}
+
+// The same from a frame of lone-black codes (lone[p] as lone_at's).
 inline std::size_t find_dropped(const std::uint8_t* lone, int w, int h, int k, double alpha, dropped_scratch& s,
                                 const executor& exec, std::vector<dropped_pixel>& out) {
     const std::size_t row = static_cast<std::size_t>(w);
-    auto black_at = [&](int x, int y) -> std::uint64_t {
-        const std::uint8_t l = lone[static_cast<std::size_t>(y) * row + static_cast<std::size_t>(x)];
-        return l == 0 ? 0 : std::uint64_t{1} << (l - 1);
-    };
-    return find_dropped(w, h, k, alpha, black_at, s, exec, out);
+    return find_dropped(
+        w, h, k, alpha, [&](int x, int y) { return lone[static_cast<std::size_t>(y) * row + static_cast<std::size_t>(x)]; }, s,
+        exec, out);
 }
 
 }  // namespace firefly

@@ -466,7 +466,7 @@ private:
                     return std::uint64_t{1} << k;
             return 0;
         };
-        (void)find_dropped(w, h, 2, options_.alpha, black_at, dropped_scratch_, exec_, dropped_found_);
+        (void)find_dropped_masks(w, h, 2, options_.alpha, black_at, dropped_scratch_, exec_, dropped_found_);
         for (const dropped_pixel& d : dropped_found_) {
             half_state& s = halves_[d.buffer];
             s.label[d.pixel] = static_cast<std::uint8_t>((s.label[d.pixel] & ~pixel_class_bits) | nonfinite_class);
@@ -1117,10 +1117,13 @@ private:
         const int w = hb.color.width(), nc = std::min(hb.color.channels(), 3);
         s.before.assign(s.fix.size() * 3, 0.0f);
         for (std::size_t e = 0; e < s.fix.size(); ++e)
-            for (int c = 0; c < nc; ++c)
-                s.before[e * 3 + static_cast<std::size_t>(c)] = static_cast<float>(
-                    hb.color.load(static_cast<int>(s.fix[e] % static_cast<std::uint32_t>(w)),
-                                  static_cast<int>(s.fix[e] / static_cast<std::uint32_t>(w)), c));
+            for (int c = 0; c < nc; ++c) {
+                const double v = hb.color.load(static_cast<int>(s.fix[e] % static_cast<std::uint32_t>(w)),
+                                               static_cast<int>(s.fix[e] / static_cast<std::uint32_t>(w)), c);
+                float f = static_cast<float>(v);
+                if (f > v) f = std::nextafter(f, -HUGE_VALF);  // never above the input (a double view)
+                s.before[e * 3 + static_cast<std::size_t>(c)] = f;
+            }
     }
 
     // return_energy: energy.hpp on the cleaned half; never onto ignored (black, alpha 0) or
