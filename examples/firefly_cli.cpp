@@ -474,8 +474,8 @@ std::string clean_cross(const options& c, cross_buffer_detector& xd, std::vector
     }
     const cross_buffer_report r = xd.process(views, mv);
     if (r.left > 0)
-        return std::to_string(r.left) + " pixels have NaN/Inf in more than half of the " + inputs_noun(c) +
-               ": nothing to rebuild them from";
+        return std::to_string(r.left) + " pixels have NaN/Inf or a dropped (black) bucket in more than half of the " +
+               inputs_noun(c) + ": nothing to rebuild them from";
     if (!r.ok()) return std::string("cannot clean the frame: ") + r.error.message();
     put_counts(rec, r);
     line = "fireflies " + std::to_string(r.fireflies) + " (per " + (c.mode == input_mode::renders ? "render" : "buffer") + ":";

@@ -627,6 +627,9 @@ function(check_dropped_renders name want)
 endfunction()
 check_dropped_renders(dropped_two_renders 1152 ${A} ${WORK}/black_b.exr ${WORK}/a2.exr ${WORK}/black_b2.exr)
 check_dropped_renders(dropped_two_renders_intact 0 ${A} ${B} ${WORK}/a2.exr ${WORK}/b2.exr)
+# black in two of three renders: more than half unusable there, the frame refused, saying so
+expect_fail(dropped_most_renders "dropped (black) bucket in more than half of the renders" ${O}
+            --renders ${A} ${WORK}/black_b.exr ${WORK}/black_b2.exr -o ${O})
 expect_fail(energy_coarse_range "--energy-coarse-sigma" ${WORK}/noen3.exr ${A} ${B} -o ${WORK}/noen3.exr --energy-coarse-sigma 1)
 check_energy_options(halves_energy_default ON ${A} ${B} -o ${WORK}/en2.exr)
 expect_fail(renders_one_variance_name "--variance wants three names" ${O} --renders ${renders4} -o ${O} --variance V)
