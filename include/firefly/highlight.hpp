@@ -23,9 +23,9 @@
 // side are rarer still (about (pA pB)^2 per pixel). So a both-half outlier next to a strict
 // highlight, or next to more both-half outliers than the frame's density of them explains (a
 // binomial tail below 1e-3 over its 8 neighbours), is held to the looser
-// cluster_relative_error, unless one-half outliers around it say fireflies are dense there
-// (pipeline.hpp, decide_pairs: they must be outnumbered by the strict neighbours, or twice over
-// by the pairs). (Tried: the density of the 15x15 window around the pixel where that
+// cluster_relative_error, unless one-half fireflies around it say fireflies are dense there
+// (pipeline.hpp, decide_pairs: they must be outnumbered by the strict neighbours, or more than
+// twice by the pairs). (Tried: the density of the 15x15 window around the pixel where that
 // is higher, since unrelated pairs meet side by side all the time where fireflies are dense,
 // as in a caustic lit by them: the simulated caustics 0.033 -> 0.029, but a wide noisy
 // highlight, every pixel a pair, then explains itself as chance: a 16x16 spot at relative
