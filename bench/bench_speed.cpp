@@ -448,6 +448,33 @@ void layouts(benchmark::State& st, std::string scene, int w, int h) {
     st.counters["met"] = worst <= 1.3;
 }
 
+// One half's standard-deviation pass (compute_stddev in row bands on the executor): a half's
+// own work on a pool, where the frame's stages also split the two halves. x_read: against
+// half the frame's read pass (one half's colour and variance).
+void one_half_stddev(benchmark::State& st, std::string scene, int w, int h, unsigned threads) {
+    const frame_data* f = frame_of(scene, w, h);
+    working_copy c(*f);
+    const executor exec = executor::threads(threads);
+    std::vector<float> sd(f->pixels());
+    std::vector<std::uint8_t> label(f->pixels());
+    const double unit = read_ms(c).wall / 2.0;
+    auto pass = [&] {
+        return compute_stddev(c.view[0].color, c.view[0].variance, c.view[0].alpha, variance_reduction::mean, sd.data(),
+                              label.data(), exec);
+    };
+    (void)pass();  // the pool's threads started, the outputs' pages touched
+    double total = 0;
+    for (auto _ : st) {
+        const auto t0 = clock_type::now();
+        benchmark::DoNotOptimize(pass());
+        const double t = ms_since(t0);
+        st.SetIterationTime(t / 1e3);
+        total += t;
+    }
+    st.counters["read_ms"] = unit;
+    st.counters["x_read"] = st.iterations() ? total / static_cast<double>(st.iterations()) / unit : 0.0;
+}
+
 // ---------------------------------------------------------------------------------------------
 // Registration
 
@@ -503,6 +530,11 @@ int register_all() {
     add_frame("no_bucket", k2, false, false, false);
     add_frame("dropped_bucket", k2, false, false, false);  // the failed bucket written black
     add_frame("dense30", k2, false, true, true);
+    for (unsigned n : {1u, 2u})
+        benchmark::RegisterBenchmark(("one_half/stddev/caustics/" + k2.label() + "/threads:" + std::to_string(n)).c_str(),
+                                     one_half_stddev, "caustics", k2.w, k2.h, n)
+            ->UseManualTime()
+            ->Unit(benchmark::kMillisecond);
     for (size2 s : {small, k2}) {
         benchmark::RegisterBenchmark(("target_failed_bucket/" + s.label()).c_str(), target_failed_bucket, s.w, s.h)
             ->UseManualTime()

@@ -4,6 +4,8 @@
 #include <firefly/sim/scene.hpp>
 
 #include <atomic>
+#include <cfloat>
+#include <limits>
 #include <cstring>
 #include <mutex>
 #include <set>
@@ -137,6 +139,55 @@ TEST_CASE("the detector gives the same bytes for serial, threads(2) and threads(
             CHECK(same_bytes(serial, threaded));
             CHECK(threaded.r.half[0].fireflies == serial.r.half[0].fireflies);
             CHECK(threaded.r.half[1].repaired == serial.r.half[1].repaired);
+        }
+    }
+}
+
+TEST_CASE("compute_stddev in row bands gives the same bits and counts for any executor", "[parallel][stddev]") {
+    // 3 bands and a short last one (150 rows), with every pixel class: NaN, Inf, black, alpha 0,
+    // negative variance, denormals, FLT_MAX; packed RGB (the SSE2 kernel) and planar (strided).
+    const int w = 37, h = 150;
+    const std::size_t n = static_cast<std::size_t>(w) * h;
+    sim::detail::counter_rng rng(7, 0, 0, 0);
+    std::vector<float> col(n * 3), var(n * 3), alpha(n, 1.0f);
+    for (std::size_t i = 0; i < n * 3; ++i) {
+        col[i] = static_cast<float>(rng.uniform() * 4.0);
+        var[i] = static_cast<float>(rng.uniform() * 2.0 - 0.1);  // some negative
+    }
+    for (std::size_t p = 0; p < n; p += 13) col[p * 3 + 1] = std::numeric_limits<float>::quiet_NaN();
+    for (std::size_t p = 5; p < n; p += 29) var[p * 3] = std::numeric_limits<float>::infinity();
+    for (std::size_t p = 7; p < n; p += 17) col[p * 3] = col[p * 3 + 1] = col[p * 3 + 2] = 0.0f;
+    for (std::size_t p = 3; p < n; p += 31) alpha[p] = 0.0f;
+    for (std::size_t p = 11; p < n; p += 37) var[p * 3 + 2] = 1e-44f;
+    for (std::size_t p = 19; p < n; p += 41) var[p * 3 + 1] = FLT_MAX;
+    std::vector<float> planar(n * 3);
+    for (std::size_t p = 0; p < n; ++p)
+        for (std::size_t c = 0; c < 3; ++c) planar[c * n + p] = col[p * 3 + c];
+    const auto cv = *make_image_view(static_cast<const float*>(col.data()), w, h, 3);
+    const auto pv = *image_view<const float>::create(planar.data(), w, h, 3, 4, static_cast<std::ptrdiff_t>(w) * 4,
+                                                     static_cast<std::ptrdiff_t>(n) * 4);
+    const auto vv = *make_image_view(static_cast<const float*>(var.data()), w, h, 3);
+    for (const bool with_alpha : {false, true}) {
+        image_view<const float> a;
+        if (with_alpha) a = *make_image_view(static_cast<const float*>(alpha.data()), w, h, 1);
+        for (const auto& colour : {cv, pv}) {
+            std::vector<float> sd0(n);
+            std::vector<std::uint8_t> l0(n);
+            const stddev_counts k0 = compute_stddev(colour, vv, a, variance_reduction::mean, sd0.data(), l0.data());
+            REQUIRE(k0.nonfinite > 0);
+            REQUIRE(k0.ignored > 0);
+            REQUIRE(k0.negative_variance > 0);
+            for (const executor& e : {executor::serial(), executor::threads(2), executor::threads(3)}) {
+                std::vector<float> sd(n, -7.0f);
+                std::vector<std::uint8_t> l(n, 0xAB);
+                const stddev_counts k = compute_stddev(colour, vv, a, variance_reduction::mean, sd.data(), l.data(), e);
+                CHECK(std::memcmp(sd.data(), sd0.data(), n * sizeof(float)) == 0);
+                CHECK(l == l0);
+                CHECK(k.valid == k0.valid);
+                CHECK(k.ignored == k0.ignored);
+                CHECK(k.nonfinite == k0.nonfinite);
+                CHECK(k.negative_variance == k0.negative_variance);
+            }
         }
     }
 }

@@ -319,7 +319,6 @@ private:
         }
     };
 
-    static constexpr int band_rows = 64;  // row bands of the full-frame passes: tasks for any pool
 
     static frame_report& fail(frame_report& r, status st) {
         r.error = st;
@@ -427,23 +426,18 @@ private:
 
     template <class C, class V, class A>
     void stddev_bands(const half_buffer<C, V, A>* const* hb) {
-        const int h = hb[0]->color.height(), w = hb[0]->color.width();
-        const std::size_t bands = static_cast<std::size_t>((h + band_rows - 1) / band_rows);
+        const std::size_t bands = detail::stddev_bands(hb[0]->color.height());
         for (half_state& s : halves_) {
             s.sd.resize(hb[0]->color.pixel_count());
             s.label.resize(s.sd.size());
             s.band_counts.assign(bands, stddev_counts{});
         }
-        exec_.run(2 * bands, [&](std::size_t t) {
+        exec_.run(2 * bands, [&](std::size_t t) {  // both halves' bands in one run
             const std::size_t half = t / bands, band = t % bands;
-            const int y0 = static_cast<int>(band) * band_rows, rows = std::min(band_rows, h - y0);
             const half_buffer<C, V, A>& b = *hb[half];
             half_state& s = halves_[half];
-            const std::size_t at = index(0, y0, w);
-            s.band_counts[band] = detail::stddev_pass(
-                *b.color.subview(0, y0, w, rows), *b.variance.subview(0, y0, w, rows),
-                b.alpha.empty() ? b.alpha : *b.alpha.subview(0, y0, w, rows), options_.reduction, s.sd.data() + at,
-                s.label.data() + at);
+            s.band_counts[band] = detail::stddev_band(b.color, b.variance, b.alpha, options_.reduction, s.sd.data(),
+                                                      s.label.data(), band);
         });
     }
 

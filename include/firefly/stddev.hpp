@@ -35,6 +35,7 @@
 #endif
 
 #include "image_view.hpp"
+#include "parallel.hpp"
 #include "status.hpp"
 
 namespace firefly {
@@ -555,6 +556,49 @@ stddev_counts compute_stddev(const image_view<C>& color, const image_view<V>& va
                              const image_view<A>& alpha, variance_reduction how, float* sd,
                              std::uint8_t* label) noexcept {
     return detail::stddev_pass(color, variance, alpha, how, sd, label);
+}
+
+// Rows per task of the banded pass: a 2K half gives 17 tasks, work for any pool.
+inline constexpr int stddev_band_rows = 64;
+
+namespace detail {
+// Band `band` (rows band * stddev_band_rows onwards) of the pass, into the same places of sd
+// and label as the whole pass writes. Every pixel's value depends on that pixel alone, so
+// the bands give the whole pass's bits.
+template <class C, class V, class A>
+stddev_counts stddev_band(const image_view<C>& color, const image_view<V>& variance, const image_view<A>& alpha,
+                          variance_reduction how, float* sd, std::uint8_t* label, std::size_t band) noexcept {
+    const int w = color.width();
+    const int y0 = static_cast<int>(band) * stddev_band_rows;
+    const int rows = std::min(stddev_band_rows, color.height() - y0);
+    const std::size_t at = static_cast<std::size_t>(y0) * static_cast<std::size_t>(w);
+    return stddev_pass(*color.subview(0, y0, w, rows), *variance.subview(0, y0, w, rows),
+                       alpha.empty() ? alpha : *alpha.subview(0, y0, w, rows), how, sd + at, label + at);
+}
+
+inline std::size_t stddev_bands(int height) noexcept {
+    return static_cast<std::size_t>((std::max(height, 0) + stddev_band_rows - 1) / stddev_band_rows);
+}
+}  // namespace detail
+
+// The same pass with its rows in bands across exec (one half on a renderer's pool): the same
+// bits and counts as compute_stddev above, for any executor.
+template <class C, class V, class A>
+stddev_counts compute_stddev(const image_view<C>& color, const image_view<V>& variance,
+                             const image_view<A>& alpha, variance_reduction how, float* sd,
+                             std::uint8_t* label, const executor& exec) {
+    std::vector<stddev_counts> bands(detail::stddev_bands(color.height()));
+    exec.run(bands.size(), [&](std::size_t band) {
+        bands[band] = detail::stddev_band(color, variance, alpha, how, sd, label, band);
+    });
+    stddev_counts all;
+    for (const stddev_counts& b : bands) {
+        all.valid += b.valid;
+        all.ignored += b.ignored;
+        all.nonfinite += b.nonfinite;
+        all.negative_variance += b.negative_variance;
+    }
+    return all;
 }
 
 }  // namespace firefly
