@@ -276,7 +276,7 @@ inline double median_of(double* v, int n) noexcept {
 // variance the median of their Var[x] / x^2 / 9. NaN when R cannot tell (fewer than 2).
 inline double rest_noise(const pixel_buffers& p, int i, double mean, bool with_variance) noexcept {
     const int n = p.usable - i;
-    std::array<double, max_buffers> r{};
+    std::array<double, max_buffers> r;  // (only the entries written are read)
     int m = 0;
     double ss = 0;
     for (int j = i; j < p.usable; ++j) {
@@ -342,15 +342,33 @@ inline int judge_pixel(pixel_buffers& p, double noise, bool with_variance, const
     return 0;
 }
 
+// Whether judge_pixel flags nothing at (p) whatever the pooled noise: each step's statistic
+// without it (the noise of the buffers below the candidate alone) bounds the statistic with it
+// from above (the pooled noise only raises the denominator, and every operation is monotone),
+// so where each bound is at most the step's smallest threshold over the pool sizes (lowest[i]),
+// no step can pass. NaN (the candidate not above the rest) passes no step either.
+inline bool cannot_flag(const pixel_buffers& p, bool with_variance, const std::array<double, max_buffers / 2 + 1>& lowest) noexcept {
+    for (int i = step_limit(p); i >= 1; --i) {
+        const double t = step_statistic(p, i, 0.0, with_variance);
+        if (t > lowest[static_cast<std::size_t>(i)]) return false;
+    }
+    return true;
+}
+
 // The pixel's p-value (log) for "no firefly here": the smallest over its steps of
 // C(K, i - 1) P(t_df > T_i), the level at which judge_pixel would first flag it.
 inline double pixel_log_p(const pixel_buffers& p, double noise, bool with_variance, double df) noexcept {
     double best = 0;
     double log_binom = 0;  // log C(K, i - 1)
+    double highest = 0;    // the largest statistic of the steps before
     const int limit = step_limit(p);
     for (int i = 1; i <= limit; ++i) {
         const double t = step_statistic(p, i, noise, with_variance);
-        if (t > 0) {
+        // A step whose statistic is not above an earlier one's cannot give the smallest: its
+        // tail is not smaller and C(K, i - 1) grows with i (by at least (K + 4) / (K - 2) a
+        // step, far past any rounding of the tail), so its tail is not computed: the same minimum.
+        if (t > highest) {
+            highest = t;
             // no noise to judge by (R agree exactly): the smallest p a double's log can carry
             const double l = t == HUGE_VAL ? -DBL_MAX : log_binom + student_t_log_upper_tail(t, df);
             best = std::min(best, l);
@@ -473,6 +491,11 @@ private:
         const bool with_var = has_var && (k <= 3 || options_.use_variance);
         const int window = 2 * options_.radius + 1, pool = window * window;
         thresholds_.fill(options_.false_alarm, k, pool, std::vector<std::uint8_t>(static_cast<std::size_t>(pool), 1));
+        lowest_step_.fill(HUGE_VAL);
+        for (int n = 1; n <= pool; ++n)
+            for (int i = 1; i <= k / 2; ++i)
+                lowest_step_[static_cast<std::size_t>(i)] =
+                    std::min(lowest_step_[static_cast<std::size_t>(i)], thresholds_.at(n).step[static_cast<std::size_t>(i)]);
         const int h = b[0].color.height();
         noise_.resize(rep.pixels);
         level_.resize(rep.pixels);
@@ -589,15 +612,43 @@ private:
         for (int i = 0; i < p.k; ++i)
             if (p.finite[static_cast<std::size_t>(i)]) p.order[static_cast<std::size_t>(p.usable++)] = i;
         const int nc = b[0].color.channels();
-        std::sort(p.order.begin(), p.order.begin() + p.usable, [&](int i, int j) {
-            if (p.y[static_cast<std::size_t>(i)] != p.y[static_cast<std::size_t>(j)])
-                return p.y[static_cast<std::size_t>(i)] > p.y[static_cast<std::size_t>(j)];
+        auto colour_above = [&](int i, int j) {
             for (int c = 0; c < nc; ++c) {
                 const double a = b[i].color.load(x, y, c), o = b[j].color.load(x, y, c);
                 if (a != o) return a > o;
             }
             return false;
-        });
+        };
+        if (p.usable > 16) {
+            std::sort(p.order.begin(), p.order.begin() + p.usable, [&](int i, int j) {
+                if (p.y[static_cast<std::size_t>(i)] != p.y[static_cast<std::size_t>(j)])
+                    return p.y[static_cast<std::size_t>(i)] > p.y[static_cast<std::size_t>(j)];
+                return colour_above(i, j);
+            });
+            return;
+        }
+        // Up to 16 buffers, the order std::sort gives there (a stable insertion sort), on
+        // local (y, buffer) keys: no indirection through the order in the inner loop.
+        struct key {
+            double y;
+            int i;
+        };
+        std::array<key, 16> keys;
+        for (int a = 0; a < p.usable; ++a) {
+            const int i = p.order[static_cast<std::size_t>(a)];
+            keys[static_cast<std::size_t>(a)] = {p.y[static_cast<std::size_t>(i)], i};
+        }
+        for (int a = 1; a < p.usable; ++a) {
+            const key v = keys[static_cast<std::size_t>(a)];
+            int j = a;
+            for (; j > 0; --j) {
+                const key& u = keys[static_cast<std::size_t>(j - 1)];
+                if (!(v.y > u.y || (v.y == u.y && colour_above(v.i, u.i)))) break;
+                keys[static_cast<std::size_t>(j)] = u;
+            }
+            keys[static_cast<std::size_t>(j)] = v;
+        }
+        for (int a = 0; a < p.usable; ++a) p.order[static_cast<std::size_t>(a)] = keys[static_cast<std::size_t>(a)].i;
     }
 
     // The K buffers of pixel (x, y), read and sorted; a dropped buffer counts as non-finite.
@@ -720,7 +771,7 @@ private:
     // its estimates). In a smooth region almost every neighbour joins. With fewer than 2 (a
     // pixel unlike its neighbours) its law is unknown: the window's noise.
     pooled pooled_noise(int x, int y, int w, int h, int k, bool with_var, double vp) const {
-        std::array<double, 17 * 17> all{}, near{};
+        std::array<double, 17 * 17> all, near;  // (only the entries written are read)
         int n = 0, joined = 0;
         const int r = options_.radius;
         const std::size_t self = index(x, y, w);
@@ -778,9 +829,13 @@ private:
                 if (!untested_.empty()) untested_[index(x, y, w)] = 1;
                 continue;
             }
-            const pooled pn = pooled_noise(x, y, w, h, k, with_var, own_rest(p, with_var));
             if (p.usable >= 3 && !before) ++rc.tested;
-            const int flagged = pn.n > 0 ? detail::judge_pixel(p, pn.noise, with_var, thresholds_.at(pn.n)) : 0;
+            int flagged = 0;
+            pooled pn{};
+            if (!detail::cannot_flag(p, with_var, lowest_step_)) {  // most pixels: no pooled noise needed
+                pn = pooled_noise(x, y, w, h, k, with_var, own_rest(p, with_var));
+                flagged = pn.n > 0 ? detail::judge_pixel(p, pn.noise, with_var, thresholds_.at(pn.n)) : 0;
+            }
             if (flagged > 0)
                 rc.found.push_back({x, detail::pixel_log_p(p, pn.noise, with_var, detail::pooled_df(pn.n, k)), pn.n, flagged});
             else if (bad > 0)
@@ -969,6 +1024,7 @@ private:
     executor exec_;
     detector pair_;
     detail::threshold_table thresholds_{};  // at the cap level, false_alarm, every pool size
+    std::array<double, detail::max_buffers / 2 + 1> lowest_step_{};  // each step's smallest of those
     detail::threshold_table frame_{};       // at the frame's level (fdr.hpp)
     double frame_log_p_ = 0;                 // log of the largest p-value kept
     double frame_q_ = 0;                     // the frame's level (0: nothing kept)
