@@ -6,6 +6,9 @@
 #include <firefly/sim/scene.hpp>
 #include <firefly/sim/scenes.hpp>
 
+#include <algorithm>
+#include <array>
+#include <cfloat>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -674,4 +677,76 @@ TEST_CASE("K buffers: negative pixels' noise is kept, a firefly on them removed"
         INFO("k " << k << ": " << changed << " negative pixel-buffers flagged besides the firefly");
         CHECK(static_cast<double>(changed) <= 0.05 * 5 * 16 * k);
     }
+}
+
+namespace {
+// A pixel of k buffers with the given levels (cube roots taken, sorted highest first), the
+// relative variances of their means rel (NaN: none).
+detail::pixel_buffers pixel_of(const std::vector<double>& levels, double rel) {
+    detail::pixel_buffers p;
+    p.k = static_cast<int>(levels.size());
+    p.usable = p.k;
+    for (int i = 0; i < p.k; ++i) {
+        const std::size_t s = static_cast<std::size_t>(i);
+        p.level[s] = levels[s];
+        p.y[s] = std::cbrt(levels[s]);
+        p.rel_var[s] = rel;
+        p.finite[s] = true;
+        p.flagged[s] = false;
+        p.order[s] = i;
+    }
+    std::sort(p.order.begin(), p.order.begin() + p.k, [&](int i, int j) { return p.y[static_cast<std::size_t>(i)] > p.y[static_cast<std::size_t>(j)]; });
+    return p;
+}
+}  // namespace
+
+TEST_CASE("a pixel the screen rules out is flagged by no pooled noise, and the p-value is the smallest over every step",
+          "[buffers][invariant]") {
+    // The screen (detail::cannot_flag) decides on the spread of the buffers below each
+    // candidate alone; the step-down with any pooled noise >= 0 must then flag nothing. The
+    // p-value skips steps whose statistic is not above an earlier one's: it must equal the
+    // minimum over every step. Random pixels with ties, zeros, negatives and one huge buffer.
+    sim::detail::counter_rng rng(5, 1, 2, 3);
+    int screened = 0, flagged_somewhere = 0;
+    for (int trial = 0; trial < 20000; ++trial) {
+        const int k = 3 + static_cast<int>(rng.uniform() * 14.0);  // 3 .. 16
+        std::vector<double> levels(static_cast<std::size_t>(k));
+        for (double& l : levels) {
+            const double u = rng.uniform();
+            l = u < 0.05 ? 0.0 : u < 0.1 ? -rng.uniform() : std::exp(rng.normal() * 0.4);
+        }
+        if (rng.uniform() < 0.3) levels[0] *= 1.0 + 40.0 * rng.uniform();  // a firefly
+        if (rng.uniform() < 0.1) levels[1] = levels[2];                    // a tie
+        const bool with_var = rng.uniform() < 0.3;
+        const double rel = rng.uniform() < 0.1 ? std::numeric_limits<double>::quiet_NaN() : 0.05 * rng.uniform();
+        detail::pixel_buffers p = pixel_of(levels, rel);
+        const double df = 1.0 + 60.0 * rng.uniform();
+        detail::cross_thresholds th;
+        th.fill(std::pow(10.0, -2.0 - 3.0 * rng.uniform()), k, df);
+        std::array<double, detail::max_buffers / 2 + 1> lowest{};
+        lowest.fill(HUGE_VAL);
+        for (int i = 1; i <= k / 2; ++i) lowest[static_cast<std::size_t>(i)] = th.step[static_cast<std::size_t>(i)];
+        const double noises[] = {0.0, 1e-6, 0.01 * rng.uniform(), 0.3, HUGE_VAL};
+        if (detail::cannot_flag(p, with_var, lowest)) {
+            ++screened;
+            for (const double noise : noises) {
+                detail::pixel_buffers q = p;
+                CHECK(detail::judge_pixel(q, noise, with_var, th) == 0);
+            }
+        }
+        for (const double noise : noises) {
+            detail::pixel_buffers q = p;
+            flagged_somewhere += detail::judge_pixel(q, noise, with_var, th) > 0;
+            // every step's p-value, the brute-force minimum
+            double best = 0, log_binom = 0;
+            for (int i = 1; i <= detail::step_limit(p); ++i) {
+                const double t = detail::step_statistic(p, i, noise, with_var);
+                if (t > 0) best = std::min(best, t == HUGE_VAL ? -DBL_MAX : log_binom + student_t_log_upper_tail(t, df));
+                log_binom += std::log(static_cast<double>(k - i + 1) / i);
+            }
+            CHECK(detail::pixel_log_p(p, noise, with_var, df) == best);
+        }
+    }
+    CHECK(screened > 2000);          // the screen decides often
+    CHECK(flagged_somewhere > 2000);  // and the step-down flags often: both sides are exercised
 }
