@@ -535,3 +535,40 @@ TEST_CASE("K buffers: no light given back where too few buffers are left to test
     }
 }
 
+
+// K = 2 hands the frame to the pair detector; its report must count what that found dropped
+// as the K >= 3 path does (report.dropped, per_buffer), as its masks say. (It had counted
+// fireflies and non-finite pixels only: the fuzz target's seed random_4 found the K >= 3 twin
+// of this check failing in the harness, which did not count dropped pixels.)
+TEST_CASE("K buffers: two buffers count the pixels the pair detector found dropped", "[dropped][buffers]") {
+    sim::buffers b = sim::simulate_buffers(sim::named_scene("sparse_fireflies", 128, 96, 3), 2);
+    const int w = b.width, h = b.height;
+    for (int y = 30; y < 50; ++y)
+        for (int x = 60; x < 84; ++x)
+            for (int c = 0; c < 3; ++c) {
+                b.color[1][pixel(x, y, w) * 3 + static_cast<std::size_t>(c)] = 0.0f;
+                b.variance[1][pixel(x, y, w) * 3 + static_cast<std::size_t>(c)] = 0.0f;
+            }
+    std::vector<std::vector<std::uint8_t>> mk(2, std::vector<std::uint8_t>(b.pixels(), 0));
+    std::vector<buffer_view<float>> views;
+    std::vector<image_view<std::uint8_t>> masks;
+    for (int i = 0; i < 2; ++i) {
+        views.push_back({*make_image_view(b.color[static_cast<std::size_t>(i)].data(), w, h, 3),
+                         *make_image_view(b.variance[static_cast<std::size_t>(i)].data(), w, h, 3)});
+        masks.push_back(*make_image_view(mk[static_cast<std::size_t>(i)].data(), w, h, 1));
+    }
+    cross_buffer_detector d;
+    const cross_buffer_report r = d.process(views, masks);
+    REQUIRE(r.ok());
+    CHECK(r.pair.half[1].dropped == 20u * 24u);
+    CHECK(r.dropped == r.pair.half[0].dropped + r.pair.half[1].dropped);
+    std::size_t marked = 0;
+    for (int i = 0; i < 2; ++i) {
+        std::size_t found = 0;
+        for (const std::uint8_t m : mk[static_cast<std::size_t>(i)])
+            found += (m & (mask_bits::firefly | mask_bits::nonfinite | mask_bits::dropped)) != 0;
+        CHECK(r.per_buffer[static_cast<std::size_t>(i)] == found);
+        marked += found;
+    }
+    CHECK(r.fireflies + r.nonfinite + r.dropped == marked);
+}

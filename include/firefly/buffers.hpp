@@ -555,7 +555,8 @@ private:
             const half_report& hr = rep.pair.half[i];
             rep.fireflies += hr.fireflies;
             rep.nonfinite += hr.nonfinite;
-            rep.per_buffer[static_cast<std::size_t>(i)] = hr.fireflies + hr.nonfinite;
+            rep.dropped += hr.dropped;
+            rep.per_buffer[static_cast<std::size_t>(i)] = hr.fireflies + hr.nonfinite + hr.dropped;
             rep.left = std::max(rep.left, hr.unreachable);  // pixels: the larger half's count
         }
         rep.tested = rep.pair.half[0].valid;

@@ -157,7 +157,7 @@ void check_frame(const frame_shape& f, const std::vector<image_storage<T>> (&s)[
         }
         marked += in_buffer;
     }
-    if (r.fireflies + r.nonfinite != marked) fail("fireflies + nonfinite differ from the masks");
+    if (r.fireflies + r.nonfinite + r.dropped != marked) fail("fireflies + nonfinite + dropped differ from the masks");
     if (f.k > 2 && left_pixels != r.left) fail("left masks differ from report.left");
     if (f.k == 2 && r.left != std::max(r.pair.half[0].unreachable, r.pair.half[1].unreachable))
         fail("K = 2: report.left differs from the halves' unreachable");
