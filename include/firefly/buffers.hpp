@@ -628,8 +628,9 @@ private:
             });
             return;
         }
-        // Up to 16 buffers, the order std::sort gives there (a stable insertion sort), on
-        // local (y, buffer) keys: no indirection through the order in the inner loop.
+        // Up to 16 buffers: a stable insertion sort on local (y, buffer) keys (no indirection
+        // through the order in the inner loop), the order libstdc++'s std::sort gives there and
+        // the same on every standard library (fully equal buffers keep their index order).
         struct key {
             double y;
             int i;

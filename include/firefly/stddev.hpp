@@ -550,7 +550,8 @@ stddev_counts stddev_pass(const image_view<C>& color, const image_view<V>& varia
 
 // Writes sd[y * width + x] and label[y * width + x] = pixel_class for every pixel. sd is -1
 // for ignored pixels and NaN for non-finite ones. sd is stored as float (4 bytes a pixel),
-// clamped to FLT_MAX for double inputs whose variance exceeds 3e76.
+// clamped to FLT_MAX for double inputs whose variance exceeds 3e76. The views are not checked
+// here: pass ones check_half_views accepts, and sd and label of width x height.
 template <class C, class V, class A>
 stddev_counts compute_stddev(const image_view<C>& color, const image_view<V>& variance,
                              const image_view<A>& alpha, variance_reduction how, float* sd,
@@ -576,13 +577,14 @@ stddev_counts stddev_band(const image_view<C>& color, const image_view<V>& varia
                        alpha.empty() ? alpha : *alpha.subview(0, y0, w, rows), how, sd + at, label + at);
 }
 
-inline std::size_t stddev_bands(int height) noexcept {
-    return static_cast<std::size_t>((std::max(height, 0) + stddev_band_rows - 1) / stddev_band_rows);
+inline std::size_t stddev_bands(int height) noexcept {  // (in size_t: no int overflow near INT_MAX)
+    const std::size_t rows = static_cast<std::size_t>(std::max(height, 0)), band = stddev_band_rows;
+    return (rows + band - 1) / band;
 }
 }  // namespace detail
 
 // The same pass with its rows in bands across exec (one half on a renderer's pool): the same
-// bits and counts as compute_stddev above, for any executor.
+// bits and counts as compute_stddev above, for any executor, and the same precondition.
 template <class C, class V, class A>
 stddev_counts compute_stddev(const image_view<C>& color, const image_view<V>& variance,
                              const image_view<A>& alpha, variance_reduction how, float* sd,
