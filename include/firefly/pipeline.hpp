@@ -319,7 +319,6 @@ private:
         }
     };
 
-
     static frame_report& fail(frame_report& r, status st) {
         r.error = st;
         return r;
@@ -474,12 +473,7 @@ private:
     void detect_candidates(half_state& s, half_report& r) {
         const std::size_t n = s.sd.size();
         stddev_counts c;
-        for (const stddev_counts& b : s.band_counts) {
-            c.valid += b.valid;
-            c.ignored += b.ignored;
-            c.nonfinite += b.nonfinite;
-            c.negative_variance += b.negative_variance;
-        }
+        for (const stddev_counts& b : s.band_counts) c += b;
         s.hist.build(s.sd.data(), n);
         r.pixels = n;
         r.valid = c.valid;

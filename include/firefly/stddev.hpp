@@ -51,6 +51,13 @@ struct stddev_counts {
     std::size_t ignored = 0;
     std::size_t nonfinite = 0;
     std::size_t negative_variance = 0;  // pixels with a channel variance < 0 (clamped to 0)
+    stddev_counts& operator+=(const stddev_counts& o) noexcept {  // (the counts of two bands)
+        valid += o.valid;
+        ignored += o.ignored;
+        nonfinite += o.nonfinite;
+        negative_variance += o.negative_variance;
+        return *this;
+    }
 };
 
 // Which colour channels count: the first three (a fourth is alpha or padding).
@@ -594,12 +601,7 @@ stddev_counts compute_stddev(const image_view<C>& color, const image_view<V>& va
         bands[band] = detail::stddev_band(color, variance, alpha, how, sd, label, band);
     });
     stddev_counts all;
-    for (const stddev_counts& b : bands) {
-        all.valid += b.valid;
-        all.ignored += b.ignored;
-        all.nonfinite += b.nonfinite;
-        all.negative_variance += b.negative_variance;
-    }
+    for (const stddev_counts& b : bands) all += b;
     return all;
 }
 
