@@ -1160,13 +1160,16 @@ private:
     }
 
     // return_energy: energy.hpp on the cleaned half; never onto ignored (black, alpha 0) or
-    // non-finite pixels. The pixels it adds light to get mask_bits::energy.
+    // non-finite pixels, nor onto an outlier kept within its noise (consistent_bit): that half
+    // kept its high draw and the rare light in it, which a return would add a second time.
+    // The pixels it adds light to get mask_bits::energy.
     template <class C, class V, class A>
     void give_energy_back(const half_buffer<C, V, A>& hb, half_state& s, const image_view<std::uint8_t>& mask,
                           half_report& r) {
         if constexpr (!std::is_const_v<C>) {
             s.decision.resize(s.label.size());
-            for (std::size_t i = 0; i < s.label.size(); ++i) s.decision[i] = cls(s.label[i]) == valid_class;
+            for (std::size_t i = 0; i < s.label.size(); ++i)
+                s.decision[i] = cls(s.label[i]) == valid_class && !(s.label[i] & consistent_bit);
             s.added.assign(mask.empty() ? 0 : s.label.size(), 0);
             const energy_totals t = return_energy_to_image(hb.color, s.fix.data(),
                                                            s.before.data(), s.fix.size(), s.decision.data(),
