@@ -44,7 +44,11 @@
 // kept as a one-half outlier within its noise (pipeline.hpp leaves it out): that half
 // kept its high draw and the rare light in it, so a return counted that light twice (1024x540:
 // dense30 0.279 -> 0.267, the simulated interior 0.0190 -> 0.0185, the Cycles interior 0.1152
-// -> 0.1130, the Cycles caustics 0.0248 -> 0.0244).
+// -> 0.1130, the Cycles caustics 0.0248 -> 0.0244). Also tried: none onto either half of such
+// a pixel (the pair's mean holds the kept half's light already): the Cycles renders 0.1130 ->
+// 0.1114 and 0.02441 -> 0.02426, dense30 and the simulated interior 1-2% lower, but the
+// simulated caustics 1% higher on all seven frames measured (held-out seeds 2-4 and the
+// tables'); not taken.
 //
 // Evaluation: s ratio is smooth at the Gaussian's scale, so M, L and V are summed exactly (the
 // separable Gaussian, taps to 3 sigma, V with the squared taps) only at nodes every
