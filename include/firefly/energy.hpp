@@ -44,11 +44,12 @@
 // kept as a one-half outlier within its noise (pipeline.hpp leaves it out): that half
 // kept its high draw and the rare light in it, so a return counted that light twice (1024x540:
 // dense30 0.279 -> 0.267, the simulated interior 0.0190 -> 0.0185, the Cycles interior 0.1152
-// -> 0.1130, the Cycles caustics 0.0248 -> 0.0244). Also tried: none onto either half of such
-// a pixel (the pair's mean holds the kept half's light already): the Cycles renders 0.1130 ->
-// 0.1114 and 0.02441 -> 0.02426, dense30 and the simulated interior 1-2% lower, but the
-// simulated caustics 1% higher on all seven frames measured (held-out seeds 2-4 and the
-// tables'); not taken.
+// -> 0.1130, the Cycles caustics 0.0248 -> 0.0244). Its other half gets the rest of the pair's
+// share (within_pair_share): the Cycles interior 0.1130 -> 0.1114, caustics 0.02441 -> 0.02429,
+// the simulated interior 0.0185 -> 0.0182, dense30 0.267 -> 0.266. Tried: none onto that half
+// either (the Cycles renders 0.1114 and 0.02426 alike, but the simulated caustics 1% higher on
+// all seven frames measured: in a caustic lit by fireflies the kept half's excess is often
+// below the pair's share).
 //
 // Evaluation: s ratio is smooth at the Gaussian's scale, so M, L and V are summed exactly (the
 // separable Gaussian, taps to 3 sigma, V with the squared taps) only at nodes every
@@ -835,6 +836,14 @@ inline const double* at_most(const double* add, const double* limit, double* out
     return out;
 }
 
+// At a pixel whose other estimate of the same light (the other half) kept a rare sample `kept`
+// above this one, channel by channel: the pair's mean holds that much of the two halves'
+// expected share (2 add) already, so this half gets the rest, at most its own add.
+inline const double* within_pair_share(const double* add, const float* kept, double* out) noexcept {
+    for (int c = 0; c < 3; ++c) out[c] = std::min(add[c], std::max(2.0 * add[c] - static_cast<double>(kept[c]), 0.0));
+    return out;
+}
+
 // The light returned at a pixel of profile p where the interpolated factor is k (0 unless
 // positive and finite).
 inline double returned_light(double k, double p) noexcept {
@@ -1096,15 +1105,25 @@ inline void map_rebuilt_excess(const image_view<C>& color, const std::uint32_t* 
 }
 }  // namespace detail
 
+// Pixels whose other half kept a rare sample (an outlier within its noise) above this image's
+// value: paired[e] (ascending) with kept[3 e .. 3 e + 2] >= 0 the other half's value less this
+// one's, channel by channel (within_pair_share).
+struct kept_pairs {
+    const std::uint32_t* paired = nullptr;
+    const float* kept = nullptr;
+    std::size_t n = 0;
+};
+
 // The energy return on one cleaned image (the first three channels of `color`): pixel
 // rebuilt[e] held before[3 e .. 3 e + 2] before it was rebuilt. The return is added wherever it
 // is positive, never where keep[p] is false (black background, alpha 0): a change far below the
 // pixel's noise still removes a bias that a denoiser, which averages the noise away, cannot.
 // added (when not null, one per pixel): set to 1 where light was added, else left as it was.
+// pairs: where the other half kept a rare sample, the return is held within the pair's share.
 template <class C>
 energy_totals return_energy_to_image(const image_view<C>& color, const std::uint32_t* rebuilt, const float* before,
                                      std::size_t n, const std::uint8_t* keep, energy_scales sigma, energy_scratch& s,
-                                     const executor& exec, std::uint8_t* added = nullptr) {
+                                     const executor& exec, std::uint8_t* added = nullptr, kept_pairs pairs = {}) {
     energy_totals t;
     const int w = color.width(), h = color.height();
     if (color.channels() < 3) return t;
@@ -1130,15 +1149,21 @@ energy_totals return_energy_to_image(const image_view<C>& color, const std::uint
     // its own input would bring the firefly back brighter (a dense frame's shape, the 3x3 median
     // of the input, reads firefly levels where fireflies happen to crowd: at 30% of pixels hit
     // per half, 7% of the rebuilt pixels came out above their input).
+    const std::uint32_t* pairs_end = pairs.paired + pairs.n;
     detail::for_each_energy_row(s, w, h, exec, [&](int y, const double* row_add) {
         double sum = 0;
         const detail::excess_pixel* e = s.where.first(y);
-        double capped[3];
+        const std::size_t row0 = static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
+        const std::uint32_t* q = std::lower_bound(pairs.paired, pairs_end, row0);
+        double capped[3], shared[3];
         for (int x = 0; x < w; ++x) {
-            const std::size_t p = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+            const std::size_t p = row0 + static_cast<std::size_t>(x);
             const double* add = &row_add[static_cast<std::size_t>(x) * 3];
             while (e != s.where.last(y) && e->x < x) ++e;
             if (e != s.where.last(y) && e->x == x) add = detail::at_most(add, e->v, capped);
+            while (q != pairs_end && *q < p) ++q;
+            if (q != pairs_end && *q == p)
+                add = detail::within_pair_share(add, &pairs.kept[static_cast<std::size_t>(q - pairs.paired) * 3], shared);
             if (!keep[p] || !(add[0] + add[1] + add[2] > 0)) continue;  // (each add is >= 0)
             const double mean_add = (add[0] + add[1] + add[2]) / 3.0;
             if (!(mean_add > 0)) continue;

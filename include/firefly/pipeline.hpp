@@ -238,6 +238,7 @@ public:
                  (h.fix.capacity() + h.cross.capacity() + h.left.capacity() + h.dropped.capacity()) * sizeof(std::uint32_t) +
                  h.cross_values.capacity() * sizeof(double) + h.decision.capacity() +
                  h.band_counts.capacity() * sizeof(stddev_counts) + h.before.capacity() * sizeof(float) + h.added.capacity() +
+                 h.paired.capacity() * sizeof(std::uint32_t) + h.paired_kept.capacity() * sizeof(float) +
                  h.recon.bytes();
         return n + energy_.bytes();
     }
@@ -292,6 +293,8 @@ private:
         std::vector<stddev_counts> band_counts;  // the standard-deviation pass per row band
         std::vector<float> before;           // return_energy: colour of the pixels to rebuild
         std::vector<std::uint8_t> added;     // return_energy with a mask: light added here
+        std::vector<std::uint32_t> paired;   // return_energy: pixels whose other half kept an
+        std::vector<float> paired_kept;      // outlier, and what it holds above this half (RGB)
         std::vector<std::uint32_t> left;     // pixels to rebuild that nothing reached (this frame)
         std::vector<std::uint32_t> dropped;  // find_dropped: this half's dropped pixels, row-major
         reconstruct_scratch recon;
@@ -369,7 +372,8 @@ private:
         if (energy) exec_.run(2, [&](std::size_t h) { keep_before(*hb[h], halves_[h]); });
         exec_.run(2, [&](std::size_t h) { finish(*hb[h], halves_[h], *masks[h], rep.half[h], clean, cross); });
         if (energy)
-            for (int h = 0; h < 2; ++h) give_energy_back(*hb[h], halves_[h], *masks[h], rep.half[h]);
+            for (int h = 0; h < 2; ++h)
+                give_energy_back(*hb[h], *hb[1 - h], halves_[h], halves_[1 - h], *masks[h], rep.half[h]);
         clock.lap(frame_report::rebuild);
         for (const half_report& hr : rep.half)
             if (!hr.reconstruction.ok()) rep.error = hr.reconstruction;
@@ -1167,28 +1171,52 @@ private:
     // return_energy: energy.hpp on the cleaned half; never onto ignored (black, alpha 0) or
     // non-finite pixels, nor onto an outlier kept within its noise (consistent_bit): that half
     // kept its high draw and the rare light in it, which a return would add a second time.
-    // The pixels it adds light to get mask_bits::energy.
+    // Where the other half kept one, the pair's mean holds that light: this half's return is
+    // held within the pair's share (energy.hpp, within_pair_share). The pixels it adds light
+    // to get mask_bits::energy.
     template <class C, class V, class A>
-    void give_energy_back(const half_buffer<C, V, A>& hb, half_state& s, const image_view<std::uint8_t>& mask,
-                          half_report& r) {
+    void give_energy_back(const half_buffer<C, V, A>& hb, const half_buffer<C, V, A>& other, half_state& s,
+                          const half_state& o, const image_view<std::uint8_t>& mask, half_report& r) {
         if constexpr (!std::is_const_v<C>) {
+            const int w = hb.color.width();
             s.decision.resize(s.label.size());
-            for (std::size_t i = 0; i < s.label.size(); ++i)
+            s.paired.clear();
+            s.paired_kept.clear();
+            for (std::size_t i = 0; i < s.label.size(); ++i) {
                 s.decision[i] = cls(s.label[i]) == valid_class && !(s.label[i] & consistent_bit);
+                if (s.decision[i] && (o.label[i] & consistent_bit) && hb.color.channels() >= 3)
+                    kept_above(hb, other, i, w, s);
+            }
             s.added.assign(mask.empty() ? 0 : s.label.size(), 0);
             const energy_totals t = return_energy_to_image(hb.color, s.fix.data(),
                                                            s.before.data(), s.fix.size(), s.decision.data(),
                                                            energy_scales(options_.energy_sigma, options_.energy_coarse_sigma), energy_, exec_,
-                                                           mask.empty() ? nullptr : s.added.data());
+                                                           mask.empty() ? nullptr : s.added.data(),
+                                                           kept_pairs{s.paired.data(), s.paired_kept.data(), s.paired.size()});
             r.energy_removed = t.removed;
             r.energy_returned = t.returned;
-            const int w = mask.width();
             for (int y = 0; y < mask.height(); ++y)
                 for (int x = 0; x < w; ++x)
                     if (s.added[index(x, y, w)]) mask(x, y) = static_cast<std::uint8_t>(mask(x, y) | mask_bits::energy);
         } else {
-            (void)hb, (void)s, (void)mask, (void)r;
+            (void)hb, (void)other, (void)s, (void)o, (void)mask, (void)r;
         }
+    }
+
+    // Pixel i, where the other half kept a rare sample: what the other half holds above this
+    // one, channel by channel (0 where not above; not listed where either is not finite).
+    template <class C, class V, class A>
+    static void kept_above(const half_buffer<C, V, A>& hb, const half_buffer<C, V, A>& other, std::size_t i, int w,
+                           half_state& s) {
+        const int x = static_cast<int>(i % static_cast<std::size_t>(w)), y = static_cast<int>(i / static_cast<std::size_t>(w));
+        float kept[3];
+        for (int c = 0; c < 3; ++c) {
+            const double d = static_cast<double>(other.color.load(x, y, c)) - hb.color.load(x, y, c);
+            if (!std::isfinite(d)) return;
+            kept[c] = d > 0 ? static_cast<float>(std::min(d, static_cast<double>(FLT_MAX))) : 0.0f;
+        }
+        s.paired.push_back(static_cast<std::uint32_t>(i));
+        s.paired_kept.insert(s.paired_kept.end(), kept, kept + 3);
     }
 
     template <class C, class V, class A>
