@@ -312,7 +312,7 @@ static double median9_of_max(const std::vector<float>& a, const std::vector<floa
 // An outlier kept within its noise (mask_bits::consistent) keeps its high draw, its own rare
 // light with it: a return on top would count that light twice. Before, every one of them near
 // removed fireflies took light: 437, 891 and 279 on the frames below. Its other half gets the
-// rest of the pair's share (energy.hpp, within_pair_share): at most the return's shape P (the
+// rest of the pair's share (energy.hpp, within_share): at most the return's shape P (the
 // 3x3 median), so where the kept half stands 2 P above it in every channel, nothing (before,
 // every such pixel-half took light: 43, 2 and 18 on these frames).
 TEST_CASE("two halves, return_energy: nothing added to an outlier kept within its noise", "[energy][pipeline]") {
@@ -350,6 +350,39 @@ TEST_CASE("two halves, return_energy: nothing added to an outlier kept within it
         all_beside += beside;
     }
     CHECK(all_beside > 40);
+}
+
+// A pair kept as a highlight that stands above a smooth neighbourhood holds its rise above it
+// (pipeline.hpp, list_held_light): were it fireflies that met, that is their light, and a spot
+// takes no glow onto its own light. Tight spots 30x their level, planted among dense
+// fireflies (the return active all around), keep their values (before: every one took light).
+TEST_CASE("two halves, return_energy: a kept pair standing above its neighbourhood takes no light",
+          "[energy][pipeline]") {
+    firefly_test::frame_views v(sim::simulate(sim::named_scene("dense10", 320, 240, 5)));
+    std::vector<std::size_t> spots;
+    for (int y = 20; y < 240; y += 40)
+        for (int x = 20; x < 320; x += 40) {
+            const std::size_t p = v.at(x, y);
+            const float level = 30.0f * (v.f.expected[p * 3] + v.f.expected[p * 3 + 1] + v.f.expected[p * 3 + 2]) / 3.0f;
+            for (int h = 0; h < 2; ++h) v.set(h, x, y, level, 0.0025f * level * level);
+            spots.push_back(p);
+        }
+    const std::vector<float> before[2] = {v.f.color[0], v.f.color[1]};
+    detector d;
+    const frame_report r = v.process(d);
+    REQUIRE(r.ok());
+    CHECK(r.half[0].energy_returned > 0);
+    std::size_t kept = 0, lit = 0;
+    for (const std::size_t p : spots)
+        for (int h = 0; h < 2; ++h) {
+            if (!(v.mask[h][p] & mask_bits::highlight)) continue;
+            ++kept;
+            lit += (v.mask[h][p] & mask_bits::energy) != 0 ||
+                   std::memcmp(&v.f.color[h][p * 3], &before[h][p * 3], 3 * sizeof(float)) != 0;
+        }
+    INFO(lit << " of " << kept << " kept spot pixel-halves took light");
+    CHECK(kept == 2 * spots.size());
+    CHECK(lit == 0);
 }
 
 // The same for K buffers: the return is added to every buffer alike, so the pixel's mean over
@@ -546,31 +579,33 @@ TEST_CASE("energy return on an image: the dense model's bits from the list, in a
     rb.insert(rb.end(), {1e6f, 1e6f, 1e6f});
     CHECK(run(rl, rb) == expect);
 
-    // pixels whose other half kept a rare sample `kept` above them get the rest of the pair's
-    // share, min(add, max(2 add - kept, 0)) a channel, a rebuilt pixel's cap first; no other
+    // pixels that hold `held` of the rare light already, of `share` times their return, get the
+    // rest, min(add, max(share add - held, 0)) a channel, a rebuilt pixel's cap first; no other
     // pixel changes
-    std::vector<std::uint32_t> paired;
-    std::vector<float> kept;
-    std::vector<float> expect_pairs = expect;
-    const double share[5] = {0.0, 1.0, 1.5, 2.0, 5.0};  // kept, in units of the pixel's add
+    std::vector<std::uint32_t> listed_held;
+    std::vector<float> held;
+    std::vector<std::uint8_t> shares;
+    std::vector<float> expect_held = expect;
+    const double amount[5] = {0.0, 0.5, 1.0, 1.5, 5.0};  // held, in units of the pixel's add
     for (std::uint32_t p = 1; p < np; p += static_cast<std::uint32_t>(1 + rng() % 7)) {
-        paired.push_back(p);
+        listed_held.push_back(p);
+        shares.push_back(static_cast<std::uint8_t>(1 + p % 2));
         for (std::size_t c = 0; c < 3; ++c) {
             const std::size_t i = p * 3 + c;
             const double add = expect[i] != color[i] ? static_cast<double>(expect[i]) - color[i] : 0.0;
-            const float k = static_cast<float>(share[(p + c) % 5] * add);
-            kept.push_back(k);
-            const double got = std::min(add, std::max(2.0 * add - static_cast<double>(k), 0.0));
-            expect_pairs[i] = got > 0 ? static_cast<float>(static_cast<double>(color[i]) + got) : color[i];
+            const float k = static_cast<float>(amount[(p + c) % 5] * shares.back() * add);
+            held.push_back(k);
+            const double got = std::min(add, std::max(shares.back() * add - static_cast<double>(k), 0.0));
+            expect_held[i] = got > 0 ? static_cast<float>(static_cast<double>(color[i]) + got) : color[i];
         }
     }
     std::vector<float> img = color;
     energy_scratch s;
     (void)return_energy_to_image(*make_image_view(img.data(), w, h, 3), list.data(), before.data(), list.size(),
                                  keep.data(), sigma, s, executor::threads(2), nullptr,
-                                 kept_pairs{paired.data(), kept.data(), paired.size()});
+                                 held_light{listed_held.data(), held.data(), shares.data(), listed_held.size()});
     std::size_t differ = 0;
-    for (std::size_t i = 0; i < np * 3; ++i) differ += std::fabs(img[i] - expect_pairs[i]) > 1e-6f * std::fabs(expect_pairs[i]);
+    for (std::size_t i = 0; i < np * 3; ++i) differ += std::fabs(img[i] - expect_held[i]) > 1e-6f * std::fabs(expect_held[i]);
     CHECK(differ == 0);
-    CHECK(expect_pairs != expect);
+    CHECK(expect_held != expect);
 }

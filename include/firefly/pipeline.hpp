@@ -229,7 +229,8 @@ public:
                          pair_family_.capacity()) * sizeof(double) +
                         (visit_.capacity() + visit_tmp_.capacity()) * sizeof(std::uint64_t) +
                         frame_log_p_.capacity() * sizeof(double) + spots_.capacity() * sizeof(strict_pair) +
-                        dropped_scratch_.bytes() + dropped_found_.capacity() * sizeof(dropped_pixel);
+                        dropped_scratch_.bytes() + dropped_found_.capacity() * sizeof(dropped_pixel) +
+                        risen_.capacity() * sizeof(std::pair<std::uint32_t, double>);
         for (const auto& h : halves_)
             n += h.sd.capacity() * sizeof(float) + h.label.capacity() +
                  h.hist.bytes() + h.select_f.capacity() * sizeof(float) +
@@ -238,7 +239,7 @@ public:
                  (h.fix.capacity() + h.cross.capacity() + h.left.capacity() + h.dropped.capacity()) * sizeof(std::uint32_t) +
                  h.cross_values.capacity() * sizeof(double) + h.decision.capacity() +
                  h.band_counts.capacity() * sizeof(stddev_counts) + h.before.capacity() * sizeof(float) + h.added.capacity() +
-                 h.paired.capacity() * sizeof(std::uint32_t) + h.paired_kept.capacity() * sizeof(float) +
+                 h.held.capacity() * sizeof(std::uint32_t) + h.held_values.capacity() * sizeof(float) + h.held_shares.capacity() +
                  h.recon.bytes();
         return n + energy_.bytes();
     }
@@ -293,8 +294,9 @@ private:
         std::vector<stddev_counts> band_counts;  // the standard-deviation pass per row band
         std::vector<float> before;           // return_energy: colour of the pixels to rebuild
         std::vector<std::uint8_t> added;     // return_energy with a mask: light added here
-        std::vector<std::uint32_t> paired;   // return_energy: pixels whose other half kept an
-        std::vector<float> paired_kept;      // outlier, and what it holds above this half (RGB)
+        std::vector<std::uint32_t> held;     // return_energy: pixels that hold some of the rare
+        std::vector<float> held_values;      // light already, how much (RGB), and of how many
+        std::vector<std::uint8_t> held_shares;  // shares (list_held_light)
         std::vector<std::uint32_t> left;     // pixels to rebuild that nothing reached (this frame)
         std::vector<std::uint32_t> dropped;  // find_dropped: this half's dropped pixels, row-major
         reconstruct_scratch recon;
@@ -371,9 +373,14 @@ private:
         const bool energy = clean && options_.return_energy;
         if (energy) exec_.run(2, [&](std::size_t h) { keep_before(*hb[h], halves_[h]); });
         exec_.run(2, [&](std::size_t h) { finish(*hb[h], halves_[h], *masks[h], rep.half[h], clean, cross); });
-        if (energy)
+        if (energy) {
+            risen_.clear();
+            for (std::size_t j = 0; j < pairs_.size(); ++j)
+                if (pair_base_[j] > 0) risen_.emplace_back(pairs_[j], pair_base_[j]);
+            std::sort(risen_.begin(), risen_.end());
             for (int h = 0; h < 2; ++h)
                 give_energy_back(*hb[h], *hb[1 - h], halves_[h], halves_[1 - h], *masks[h], rep.half[h]);
+        }
         clock.lap(frame_report::rebuild);
         for (const half_report& hr : rep.half)
             if (!hr.reconstruction.ok()) rep.error = hr.reconstruction;
@@ -1171,28 +1178,23 @@ private:
     // return_energy: energy.hpp on the cleaned half; never onto ignored (black, alpha 0) or
     // non-finite pixels, nor onto an outlier kept within its noise (consistent_bit): that half
     // kept its high draw and the rare light in it, which a return would add a second time.
-    // Where the other half kept one, the pair's mean holds that light: this half's return is
-    // held within the pair's share (energy.hpp, within_pair_share). The pixels it adds light
-    // to get mask_bits::energy.
+    // Pixels that hold some of that light already get the rest of their share (list_held_light).
+    // The pixels it adds light to get mask_bits::energy.
     template <class C, class V, class A>
     void give_energy_back(const half_buffer<C, V, A>& hb, const half_buffer<C, V, A>& other, half_state& s,
                           const half_state& o, const image_view<std::uint8_t>& mask, half_report& r) {
         if constexpr (!std::is_const_v<C>) {
             const int w = hb.color.width();
             s.decision.resize(s.label.size());
-            s.paired.clear();
-            s.paired_kept.clear();
-            for (std::size_t i = 0; i < s.label.size(); ++i) {
+            for (std::size_t i = 0; i < s.label.size(); ++i)
                 s.decision[i] = cls(s.label[i]) == valid_class && !(s.label[i] & consistent_bit);
-                if (s.decision[i] && (o.label[i] & consistent_bit) && hb.color.channels() >= 3)
-                    kept_above(hb, other, i, w, s);
-            }
+            list_held_light(hb, other, s, o);
             s.added.assign(mask.empty() ? 0 : s.label.size(), 0);
             const energy_totals t = return_energy_to_image(hb.color, s.fix.data(),
                                                            s.before.data(), s.fix.size(), s.decision.data(),
                                                            energy_scales(options_.energy_sigma, options_.energy_coarse_sigma), energy_, exec_,
                                                            mask.empty() ? nullptr : s.added.data(),
-                                                           kept_pairs{s.paired.data(), s.paired_kept.data(), s.paired.size()});
+                                                           held_light{s.held.data(), s.held_values.data(), s.held_shares.data(), s.held.size()});
             r.energy_removed = t.removed;
             r.energy_returned = t.returned;
             for (int y = 0; y < mask.height(); ++y)
@@ -1203,20 +1205,44 @@ private:
         }
     }
 
-    // Pixel i, where the other half kept a rare sample: what the other half holds above this
-    // one, channel by channel (0 where not above; not listed where either is not finite).
+    // The pixels of this half, among those the return may reach, that hold some of the rare
+    // light already (energy.hpp, held_light), in pixel order: where the other half kept an
+    // outlier, what it holds above this half (of the pair's share, 2 returns: the pair's mean
+    // holds it); a half of a kept pair standing above a smooth neighbourhood (pair_base), its
+    // rise above that level (of its own share: were it fireflies that met, the rise is their
+    // light; a highlight spot takes no glow onto its own light). None where a value is not
+    // finite. risen_: the kept pairs' levels, by pixel.
     template <class C, class V, class A>
-    static void kept_above(const half_buffer<C, V, A>& hb, const half_buffer<C, V, A>& other, std::size_t i, int w,
-                           half_state& s) {
-        const int x = static_cast<int>(i % static_cast<std::size_t>(w)), y = static_cast<int>(i / static_cast<std::size_t>(w));
-        float kept[3];
-        for (int c = 0; c < 3; ++c) {
-            const double d = static_cast<double>(other.color.load(x, y, c)) - hb.color.load(x, y, c);
-            if (!std::isfinite(d)) return;
-            kept[c] = d > 0 ? static_cast<float>(std::min(d, static_cast<double>(FLT_MAX))) : 0.0f;
+    void list_held_light(const half_buffer<C, V, A>& hb, const half_buffer<C, V, A>& other, half_state& s,
+                         const half_state& o) {
+        s.held.clear();
+        s.held_values.clear();
+        s.held_shares.clear();
+        if (hb.color.channels() < 3) return;
+        const int w = hb.color.width();
+        auto risen = risen_.cbegin();
+        for (std::size_t i = 0; i < s.label.size(); ++i) {
+            while (risen != risen_.cend() && risen->first < i) ++risen;
+            if (!s.decision[i]) continue;
+            const bool paired = (o.label[i] & consistent_bit) != 0;
+            const bool rose = !paired && (s.label[i] & highlight_bit) && risen != risen_.cend() && risen->first == i;
+            if (!paired && !rose) continue;
+            const int x = static_cast<int>(i % static_cast<std::size_t>(w)), y = static_cast<int>(i / static_cast<std::size_t>(w));
+            double v[3], level = 0;
+            for (int c = 0; c < 3; ++c) level += (v[c] = hb.color.load(x, y, c)) / 3.0;
+            const double rise = rose && level > 0 ? std::max(0.0, 1.0 - risen->second / level) : 0.0;
+            float held[3];
+            bool finite = true;
+            for (int c = 0; c < 3; ++c) {
+                const double d = paired ? static_cast<double>(other.color.load(x, y, c)) - v[c] : v[c] * rise;
+                finite = finite && std::isfinite(d);
+                held[c] = d > 0 ? static_cast<float>(std::min(d, static_cast<double>(FLT_MAX))) : 0.0f;
+            }
+            if (!finite) continue;
+            s.held.push_back(static_cast<std::uint32_t>(i));
+            s.held_values.insert(s.held_values.end(), held, held + 3);
+            s.held_shares.push_back(paired ? 2 : 1);
         }
-        s.paired.push_back(static_cast<std::uint32_t>(i));
-        s.paired_kept.insert(s.paired_kept.end(), kept, kept + 3);
     }
 
     template <class C, class V, class A>
@@ -1312,6 +1338,7 @@ private:
     std::vector<double> frame_log_p_;  // the one-half fireflies' p-values (log), for the frame's level
     std::vector<double> pair_log_p_;   // per pair and half: the p-value (log) of its excess; NaN: none
     std::vector<double> pair_base_;    // per pair: the level its ordinary samples give (pair_rise)
+    std::vector<std::pair<std::uint32_t, double>> risen_;  // return_energy: pairs with a level, by pixel
     std::vector<double> pair_level_log_p_;  // per pair: its level against its neighbourhood's
     std::vector<double> pair_family_;  // keep_pairs_within_noise: the p-values its level comes from
     std::vector<std::uint64_t> visit_, visit_tmp_;  // for_entries_by_row
