@@ -354,35 +354,49 @@ TEST_CASE("two halves, return_energy: nothing added to an outlier kept within it
 
 // A pair kept as a highlight that stands above a smooth neighbourhood holds its rise above it
 // (pipeline.hpp, list_held_light): were it fireflies that met, that is their light, and a spot
-// takes no glow onto its own light. Tight spots 30x their level, planted among dense
-// fireflies (the return active all around), keep their values (before: every one took light).
+// takes no glow onto its own light. Tight one-pixel spots 30x their level, planted among dense
+// fireflies (the return active all around), keep their values (before: every one took light);
+// the centres of 5x5 spots, whose neighbourhood is the spot (no level to stand above), take
+// their share as any pixel does.
 TEST_CASE("two halves, return_energy: a kept pair standing above its neighbourhood takes no light",
           "[energy][pipeline]") {
     firefly_test::frame_views v(sim::simulate(sim::named_scene("dense10", 320, 240, 5)));
-    std::vector<std::size_t> spots;
+    std::vector<std::size_t> spots, centres;
+    auto plant = [&](int x0, int y0, int size) {
+        const std::size_t c = v.at(x0, y0);
+        const float level = 30.0f * (v.f.expected[c * 3] + v.f.expected[c * 3 + 1] + v.f.expected[c * 3 + 2]) / 3.0f;
+        for (int y = y0 - size / 2; y <= y0 + size / 2; ++y)
+            for (int x = x0 - size / 2; x <= x0 + size / 2; ++x)
+                for (int h = 0; h < 2; ++h) v.set(h, x, y, level, 0.0025f * level * level);
+        (size == 1 ? spots : centres).push_back(c);
+    };
     for (int y = 20; y < 240; y += 40)
-        for (int x = 20; x < 320; x += 40) {
-            const std::size_t p = v.at(x, y);
-            const float level = 30.0f * (v.f.expected[p * 3] + v.f.expected[p * 3 + 1] + v.f.expected[p * 3 + 2]) / 3.0f;
-            for (int h = 0; h < 2; ++h) v.set(h, x, y, level, 0.0025f * level * level);
-            spots.push_back(p);
-        }
+        for (int x = 20; x < 320; x += 40) plant(x, y, 1);
+    for (int y = 40; y < 240; y += 80)
+        for (int x = 40; x < 320; x += 80) plant(x, y, 5);
     const std::vector<float> before[2] = {v.f.color[0], v.f.color[1]};
     detector d;
     const frame_report r = v.process(d);
     REQUIRE(r.ok());
     CHECK(r.half[0].energy_returned > 0);
-    std::size_t kept = 0, lit = 0;
-    for (const std::size_t p : spots)
-        for (int h = 0; h < 2; ++h) {
-            if (!(v.mask[h][p] & mask_bits::highlight)) continue;
-            ++kept;
-            lit += (v.mask[h][p] & mask_bits::energy) != 0 ||
-                   std::memcmp(&v.f.color[h][p * 3], &before[h][p * 3], 3 * sizeof(float)) != 0;
-        }
-    INFO(lit << " of " << kept << " kept spot pixel-halves took light");
+    auto count = [&](const std::vector<std::size_t>& at, std::size_t& kept, std::size_t& lit) {
+        for (const std::size_t p : at)
+            for (int h = 0; h < 2; ++h) {
+                if (!(v.mask[h][p] & mask_bits::highlight)) continue;
+                ++kept;
+                lit += (v.mask[h][p] & mask_bits::energy) != 0 &&
+                       std::memcmp(&v.f.color[h][p * 3], &before[h][p * 3], 3 * sizeof(float)) != 0;
+            }
+    };
+    std::size_t kept = 0, lit = 0, wide = 0, wide_lit = 0;
+    count(spots, kept, lit);
+    count(centres, wide, wide_lit);
+    INFO(lit << " of " << kept << " kept spot pixel-halves took light; " << wide_lit << " of " << wide
+             << " 5x5 spot centres");
     CHECK(kept == 2 * spots.size());
     CHECK(lit == 0);
+    CHECK(wide == 2 * centres.size());
+    CHECK(wide_lit == wide);
 }
 
 // The same for K buffers: the return is added to every buffer alike, so the pixel's mean over
@@ -608,4 +622,14 @@ TEST_CASE("energy return on an image: the dense model's bits from the list, in a
     for (std::size_t i = 0; i < np * 3; ++i) differ += std::fabs(img[i] - expect_held[i]) > 1e-6f * std::fabs(expect_held[i]);
     CHECK(differ == 0);
     CHECK(expect_held != expect);
+    // a list out of order, or with an array missing, is not used
+    std::swap(listed_held[3], listed_held[4]);
+    for (const held_light bad : {held_light{listed_held.data(), held.data(), shares.data(), listed_held.size()},
+                                 held_light{listed_held.data() + 5, held.data(), nullptr, 3}}) {
+        std::vector<float> again = color;
+        energy_scratch s2;
+        (void)return_energy_to_image(*make_image_view(again.data(), w, h, 3), list.data(), before.data(), list.size(),
+                                     keep.data(), sigma, s2, executor{}, nullptr, bad);
+        CHECK(again == expect);
+    }
 }

@@ -1111,16 +1111,21 @@ inline void map_rebuilt_excess(const image_view<C>& color, const std::uint32_t* 
 }  // namespace detail
 
 // Pixels that already hold some of the rare light the return estimates: at pixels[e]
-// (ascending), held[3 e .. 3 e + 2] >= 0 of it, channel by channel, out of an expected share
-// of shares[e] times the pixel's own return (within_share). The two-half detector lists a
-// pixel whose other half kept a rare sample above it (share 2: the pair's; held, that
-// excess) and a half of a kept pair that stands above a smooth neighbourhood (share 1; held,
-// its rise above that neighbourhood's level).
+// (strictly ascending), held[3 e .. 3 e + 2] >= 0 of it, channel by channel, out of an
+// expected share of shares[e] times the pixel's own return (within_share, after a rebuilt
+// pixel's cap). A list that is not strictly ascending, or whose arrays are missing, is not
+// used (usable()). The two-half detector lists a pixel whose other half kept a rare sample
+// above it (share 2: the pair's; held, that excess) and a half of a kept pair that stands
+// above a smooth neighbourhood (share 1; held, its rise above that neighbourhood's level).
 struct held_light {
     const std::uint32_t* pixels = nullptr;
     const float* held = nullptr;
     const std::uint8_t* shares = nullptr;
     std::size_t n = 0;
+    bool usable() const noexcept {
+        return n > 0 && pixels && held && shares &&
+               std::adjacent_find(pixels, pixels + n, [](std::uint32_t a, std::uint32_t b) { return a >= b; }) == pixels + n;
+    }
 };
 
 // The energy return on one cleaned image (the first three channels of `color`): pixel
@@ -1158,6 +1163,7 @@ energy_totals return_energy_to_image(const image_view<C>& color, const std::uint
     // its own input would bring the firefly back brighter (a dense frame's shape, the 3x3 median
     // of the input, reads firefly levels where fireflies happen to crowd: at 30% of pixels hit
     // per half, 7% of the rebuilt pixels came out above their input).
+    if (!held.usable()) held = {};
     const std::uint32_t* held_end = held.pixels + held.n;
     detail::for_each_energy_row(s, w, h, exec, [&](int y, const double* row_add) {
         double sum = 0;
