@@ -51,9 +51,10 @@
 // all seven frames measured: in a caustic lit by fireflies the kept half's excess is often
 // below the pair's share). And a half of a kept pair that stands above a smooth neighbourhood
 // holds its rise above it, of its own share (were they fireflies that met, the rise is their
-// light; a highlight spot takes no glow onto its own light): the simulated caustics 0.02820 -> 0.02747, dense30 0.266 -> 0.259, the simulated
-// interior 0.01817 -> 0.01808, the Cycles caustics 0.02429 -> 0.02426, interior unchanged
-// (0.1114); the highlight scenes' spots unchanged to 4 digits.
+// light; a highlight spot takes no glow onto its own light): the simulated caustics 0.02820 ->
+// 0.02747, dense30 0.266 -> 0.259, the simulated interior 0.01817 -> 0.01808, the Cycles
+// caustics 0.02429 -> 0.02426, interior unchanged (0.1114); the highlight scenes' spots
+// unchanged to 4 digits.
 //
 // Evaluation: s ratio is smooth at the Gaussian's scale, so M, L and V are summed exactly (the
 // separable Gaussian, taps to 3 sigma, V with the squared taps) only at nodes every
@@ -1158,13 +1159,14 @@ energy_totals return_energy_to_image(const image_view<C>& color, const std::uint
     // bands of rows across the executor (distinct pixels); each row's total kept, summed in
     // row order after: the same bits for any executor
     s.row_returned.assign(static_cast<std::size_t>(h), 0.0);
+    if (!held.usable()) held = {};
+    const std::uint32_t* held_end = held.pixels + held.n;
     // A rebuilt pixel gets back at most what its rebuild took, channel by channel: the return
     // is the fireflies' light spread over their neighbourhood, and a firefly pixel lifted above
     // its own input would bring the firefly back brighter (a dense frame's shape, the 3x3 median
     // of the input, reads firefly levels where fireflies happen to crowd: at 30% of pixels hit
-    // per half, 7% of the rebuilt pixels came out above their input).
-    if (!held.usable()) held = {};
-    const std::uint32_t* held_end = held.pixels + held.n;
+    // per half, 7% of the rebuilt pixels came out above their input). A pixel listed in `held`
+    // then gets the rest of its share (within_share).
     detail::for_each_energy_row(s, w, h, exec, [&](int y, const double* row_add) {
         double sum = 0;
         const detail::excess_pixel* e = s.where.first(y);
