@@ -198,6 +198,66 @@ struct compensated {
 
 }  // namespace detail
 
+namespace detail {
+// The m removals of the one-sided test, in order (indices and values), and the summary of
+// the values never removed. idx: the finite values' indices (reordered).
+template <class Val>
+summary one_sided_removals(std::vector<std::size_t>& idx, std::size_t m, Val&& val, std::vector<std::size_t>& indices,
+                           double* removed) {
+    // Max-heap by (value, lower index first): the top m pop out in removal order.
+    auto less = [&](std::size_t a, std::size_t b) {
+        const double va = val(a), vb = val(b);
+        return va < vb || (va == vb && a > b);
+    };
+    std::make_heap(idx.begin(), idx.end(), less);
+    auto end = idx.end();
+    for (std::size_t j = 0; j < m; ++j, --end) {
+        std::pop_heap(idx.begin(), end, less);
+        indices.push_back(*(end - 1));
+        removed[j] = val(*(end - 1));
+    }
+    const std::size_t keep = idx.size() - m;  // idx[0, keep) are never removed
+    return summary_of(keep, [&](std::size_t j) { return val(idx[j]); }, [](std::size_t) { return true; });
+}
+
+// The same for the two-sided test: each step removes the value furthest from the mean of
+// those left.
+template <class Val>
+summary two_sided_removals(std::vector<std::size_t>& idx, std::size_t m, Val&& val, std::vector<std::size_t>& indices,
+                           double* removed) {
+    const std::size_t nf = idx.size();
+    std::sort(idx.begin(), idx.end(), [&](std::size_t a, std::size_t b) {
+        const double va = val(a), vb = val(b);
+        return va < vb || (va == vb && a < b);
+    });
+    // Decision pass: the mean of sorted[lo..hi] = core + low part + high part, the parts
+    // summed from the inside out so a removed extreme never cancels against the rest.
+    const std::size_t core_lo = m, core_hi = nf - m;  // core = [m, nf - m)
+    const double core = blocked_sum(core_hi - core_lo, [&](std::size_t j) { return val(idx[core_lo + j]); });
+    std::vector<double> low(m + 1, 0.0), high(m + 1, 0.0);  // low[j]: sum idx[j..m)
+    compensated acc;
+    for (std::size_t j = m; j-- > 0;) {
+        acc.add(val(idx[j]));
+        low[j] = acc.value();
+    }
+    acc = {};
+    for (std::size_t j = 0; j < m; ++j) {  // high[j + 1]: sum idx[core_hi .. core_hi + j]
+        acc.add(val(idx[core_hi + j]));
+        high[j + 1] = acc.value();
+    }
+    std::size_t lo = 0, hi = nf - 1;
+    for (std::size_t j = 0; j < m; ++j) {
+        const double count = static_cast<double>(hi - lo + 1);
+        const double mean = (core + low[lo] + high[hi + 1 - core_hi]) / count;
+        const double dlo = mean - val(idx[lo]), dhi = val(idx[hi]) - mean;
+        const std::size_t pick = dhi >= dlo ? hi-- : lo++;
+        indices.push_back(idx[pick]);
+        removed[j] = val(idx[pick]);
+    }
+    return summary_of(hi - lo + 1, [&](std::size_t j) { return val(idx[lo + j]); }, [](std::size_t) { return true; });
+}
+}  // namespace detail
+
 // Generalized ESD over values[0..n) (float or double). Non-finite values are listed in
 // result.nonfinite and left out. At most min(max_outliers, n - 2) steps are tested (lambda
 // needs df = k - 2 >= 1); two-sided at most n / 2. One-sided takes the top values from a
@@ -233,57 +293,8 @@ esd_result generalized_esd(const T* values, std::size_t n, const esd_options& o,
         return shift ? std::ldexp(v, shift) : v;
     };
     std::vector<double> removed(m);
-    summary rest;
-
-    if (!o.two_sided) {
-        // Max-heap by (value, lower index first): the top m pop out in removal order.
-        auto less = [&](std::size_t a, std::size_t b) {
-            const double va = val(a), vb = val(b);
-            return va < vb || (va == vb && a > b);
-        };
-        std::make_heap(idx.begin(), idx.end(), less);
-        auto end = idx.end();
-        for (std::size_t j = 0; j < m; ++j, --end) {
-            std::pop_heap(idx.begin(), end, less);
-            out.indices.push_back(*(end - 1));
-            removed[j] = val(*(end - 1));
-        }
-        const std::size_t keep = nf - m;  // idx[0, keep) are never removed
-        rest = summary_of(keep, [&](std::size_t j) { return val(idx[j]); },
-                          [](std::size_t) { return true; });
-    } else {
-        std::sort(idx.begin(), idx.end(), [&](std::size_t a, std::size_t b) {
-            const double va = val(a), vb = val(b);
-            return va < vb || (va == vb && a < b);
-        });
-        // Decision pass: the mean of sorted[lo..hi] = core + low part + high part, the parts
-        // summed from the inside out so a removed extreme never cancels against the rest.
-        const std::size_t core_lo = m, core_hi = nf - m;  // core = [m, nf - m)
-        const double core = detail::blocked_sum(core_hi - core_lo,
-                                                [&](std::size_t j) { return val(idx[core_lo + j]); });
-        std::vector<double> low(m + 1, 0.0), high(m + 1, 0.0);  // low[j]: sum idx[j..m)
-        detail::compensated acc;
-        for (std::size_t j = m; j-- > 0;) {
-            acc.add(val(idx[j]));
-            low[j] = acc.value();
-        }
-        acc = {};
-        for (std::size_t j = 0; j < m; ++j) {  // high[j + 1]: sum idx[core_hi .. core_hi + j]
-            acc.add(val(idx[core_hi + j]));
-            high[j + 1] = acc.value();
-        }
-        std::size_t lo = 0, hi = nf - 1;
-        for (std::size_t j = 0; j < m; ++j) {
-            const double count = static_cast<double>(hi - lo + 1);
-            const double mean = (core + low[lo] + high[hi + 1 - core_hi]) / count;
-            const double dlo = mean - val(idx[lo]), dhi = val(idx[hi]) - mean;
-            const std::size_t pick = dhi >= dlo ? hi-- : lo++;
-            out.indices.push_back(idx[pick]);
-            removed[j] = val(idx[pick]);
-        }
-        rest = summary_of(hi - lo + 1, [&](std::size_t j) { return val(idx[lo + j]); },
-                          [](std::size_t) { return true; });
-    }
+    const summary rest = o.two_sided ? detail::two_sided_removals(idx, m, val, out.indices, removed.data())
+                                     : detail::one_sided_removals(idx, m, val, out.indices, removed.data());
     detail::esd_from_removals(removed.data(), m, rest, nf, o, cache, out);
     return out;
 }

@@ -731,23 +731,6 @@ private:
         std::uint8_t* lab[2] = {halves_[0].label.data(), halves_[1].label.data()};
         const highlight_options& ho = options_.highlight;
         const int w = a.color.width(), hgt = a.color.height();
-        // The spot around (x, y): its strict neighbours as they were judged (spots_, by pixel).
-        auto spot_at = [&](int x, int y) {
-            highlight_spot spot;
-            int n = 0;
-            detail::for_each_neighbour(w, hgt, x, y, 1, [&](std::size_t j) {
-                if (!(lab[0][j] & strict_bit)) return;
-                const std::uint32_t q = static_cast<std::uint32_t>(j);
-                const auto it = std::lower_bound(spots_.begin(), spots_.end(), q,
-                                                 [](const strict_pair& s, std::uint32_t p) { return s.pixel < p; });
-                if (it == spots_.end() || it->pixel != q) return;  // (every strict pixel has one)
-                spot.sum += it->sum;
-                spot.se = std::max(spot.se, it->se);
-                ++n;
-            });
-            if (n) spot.sum /= n;
-            return spot;
-        };
         // 0 no; 1 strict; 2 kept in a cluster, or on one half under the other's firefly
         auto decide_pair = [&](std::size_t j, bool cluster) -> int {
             const std::uint32_t i = pairs_[j];
@@ -764,7 +747,7 @@ private:
             if (a_over) la = lb, va = vb;
             else if (b_over) lb = la, vb = va;
             const double base = pair_base_[j];
-            if (!is_highlight(ho, la, lb, va, vb, calibration, cluster, cluster ? spot_at(x, y) : highlight_spot{}, base))
+            if (!is_highlight(ho, la, lb, va, vb, calibration, cluster, cluster ? spot_at(x, y, w, hgt) : highlight_spot{}, base))
                 return 0;
             if (!a_over) lab[0][i] |= highlight_bit;
             if (!b_over) lab[1][i] |= highlight_bit;
@@ -776,46 +759,71 @@ private:
         for (std::size_t j = 0; j < pairs_.size(); ++j)
             if (decide_pair(j, false) == 1) lab[0][pairs_[j]] |= strict_bit;
         std::sort(spots_.begin(), spots_.end(), [](const strict_pair& p, const strict_pair& q) { return p.pixel < q.pixel; });
-        // In a cluster: next to a strict highlight, or next to more pairs than the frame's
-        // density of pairs explains (binomial tail below 1e-3 for the neighbours it has). One-half
-        // fireflies among the neighbours (one_half_firefly: one half far above the other's own
-        // noise, whatever the frame decided for it) say fireflies are dense here, and there pairs
-        // meet side by side by chance (a caustic lit by them, where both counts are high): the
-        // pair is then in a cluster only where its strict neighbours outnumber them, or its pairs
-        // outnumber them more than twice (by chance, with each half hit at rate p, a neighbour is
-        // a pair at p^2 and a one-half firefly at 2p(1 - p): more than twice as many pairs needs
-        // p > 4/5). A highlight's neighbours are its own pixels or background, with a firefly
-        // among them only at the frame's rate (simulated caustics: recall 0.853 -> 0.905, relMSE
-        // 0.0325 -> 0.0285, every highlight of the accuracy tables' scenes kept as before; on
-        // other seeds, bench/research/held_out.cpp, 6 of 36 frames lose 1 or 2 spot pixels that
-        // drew low beside one-half fireflies). Counting
-        // every one-half outlier instead reached 0.907 but broke noisy spots up where one of
-        // their pixels was NaN or confident in one half (an outlier in the other only); counting
-        // only the one-half outliers decided as fireflies left 0.890 (in a caustic's core the
-        // other half's neighbourhood is as noisy as the firefly, and many are kept as consistent).
         int min_pairs[9];
         const double q = static_cast<double>(pairs_.size()) /
                          static_cast<double>(std::max<std::size_t>(1, halves_[0].valid + halves_[1].valid) / 2 + 1);
         for (int n = 0; n <= 8; ++n) min_pairs[n] = detail::binomial_tail_count(n, q, 1e-3);
-        auto in_cluster = [&](std::uint32_t i) {
-            const int x = static_cast<int>(i % static_cast<std::uint32_t>(w));
-            const int y = static_cast<int>(i / static_cast<std::uint32_t>(w));
-            int neighbours = 0, pairs = 0, strict = 0, fireflies = 0;
-            detail::for_each_neighbour(w, hgt, x, y, 1, [&](std::size_t j) {
-                strict += (lab[0][j] & strict_bit) != 0;
-                ++neighbours;
-                pairs += (lab[0][j] & outlier_bit) && (lab[1][j] & outlier_bit);
-                fireflies += one_half_firefly(a, b, j, calibration);
-            });
-            if (fireflies > 0)
-                return strict > fireflies || (pairs >= min_pairs[neighbours] && pairs > 2 * fireflies);
-            return strict > 0 || pairs >= min_pairs[neighbours];
-        };
         if (ho.cluster_relative_error > ho.max_relative_error)
             for (std::size_t j = 0; j < pairs_.size(); ++j)
-                if (!(lab[0][pairs_[j]] & strict_bit) && in_cluster(pairs_[j])) (void)decide_pair(j, true);
+                if (!(lab[0][pairs_[j]] & strict_bit) && in_cluster(a, b, pairs_[j], min_pairs, calibration))
+                    (void)decide_pair(j, true);
         for (const std::uint32_t i : pairs_) lab[0][i] &= static_cast<std::uint8_t>(~strict_bit);
         keep_pairs_within_noise(lab);
+    }
+
+    // The spot around (x, y): its strict neighbours as they were judged (spots_, by pixel).
+    highlight_spot spot_at(int x, int y, int w, int hgt) const {
+        const std::uint8_t* lab0 = halves_[0].label.data();
+        highlight_spot spot;
+        int n = 0;
+        detail::for_each_neighbour(w, hgt, x, y, 1, [&](std::size_t j) {
+            if (!(lab0[j] & strict_bit)) return;
+            const std::uint32_t q = static_cast<std::uint32_t>(j);
+            const auto it = std::lower_bound(spots_.begin(), spots_.end(), q,
+                                             [](const strict_pair& s, std::uint32_t p) { return s.pixel < p; });
+            if (it == spots_.end() || it->pixel != q) return;  // (every strict pixel has one)
+            spot.sum += it->sum;
+            spot.se = std::max(spot.se, it->se);
+            ++n;
+        });
+        if (n) spot.sum /= n;
+        return spot;
+    }
+
+    // In a cluster: next to a strict highlight, or next to more pairs than the frame's
+    // density of pairs explains (binomial tail below 1e-3 for the neighbours it has). One-half
+    // fireflies among the neighbours (one_half_firefly: one half far above the other's own
+    // noise, whatever the frame decided for it) say fireflies are dense here, and there pairs
+    // meet side by side by chance (a caustic lit by them, where both counts are high): the
+    // pair is then in a cluster only where its strict neighbours outnumber them, or its pairs
+    // outnumber them more than twice (by chance, with each half hit at rate p, a neighbour is
+    // a pair at p^2 and a one-half firefly at 2p(1 - p): more than twice as many pairs needs
+    // p > 4/5). A highlight's neighbours are its own pixels or background, with a firefly
+    // among them only at the frame's rate (simulated caustics: recall 0.853 -> 0.905, relMSE
+    // 0.0325 -> 0.0285, every highlight of the accuracy tables' scenes kept as before; on
+    // other seeds, bench/research/held_out.cpp, 6 of 36 frames lose 1 or 2 spot pixels that
+    // drew low beside one-half fireflies). Counting
+    // every one-half outlier instead reached 0.907 but broke noisy spots up where one of
+    // their pixels was NaN or confident in one half (an outlier in the other only); counting
+    // only the one-half outliers decided as fireflies left 0.890 (in a caustic's core the
+    // other half's neighbourhood is as noisy as the firefly, and many are kept as consistent).
+    // min_pairs[n]: the pairs among n neighbours that chance no longer explains.
+    template <class C, class V, class A>
+    bool in_cluster(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b, std::uint32_t i,
+                    const int (&min_pairs)[9], double calibration) const {
+        const std::uint8_t* lab[2] = {halves_[0].label.data(), halves_[1].label.data()};
+        const int w = a.color.width(), hgt = a.color.height();
+        const int x = static_cast<int>(i % static_cast<std::uint32_t>(w));
+        const int y = static_cast<int>(i / static_cast<std::uint32_t>(w));
+        int neighbours = 0, pairs = 0, strict = 0, fireflies = 0;
+        detail::for_each_neighbour(w, hgt, x, y, 1, [&](std::size_t j) {
+            strict += (lab[0][j] & strict_bit) != 0;
+            ++neighbours;
+            pairs += (lab[0][j] & outlier_bit) && (lab[1][j] & outlier_bit);
+            fireflies += one_half_firefly(a, b, j, calibration);
+        });
+        if (fireflies > 0) return strict > fireflies || (pairs >= min_pairs[neighbours] && pairs > 2 * fireflies);
+        return strict > 0 || pairs >= min_pairs[neighbours];
     }
 
     // Is pixel j an outlier in one half only that exceeds its other half by more than

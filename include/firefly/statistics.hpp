@@ -359,6 +359,22 @@ public:
         prefix.resize(buckets + 1);
         prefix[0] = 0;
         for (std::size_t b = 0; b < buckets; ++b) prefix[b + 1] = prefix[b] + hist_[b];
+        double d_lo = -1.0, d_hi = HUGE_VAL;
+        deviation_bracket(med, k, k2, d_lo, d_hi);
+        return mad_in_bracket(v, n, med, d_lo, d_hi, k, k2, scratch);
+    }
+
+    std::size_t bytes() const noexcept {
+        return (hist_.capacity() + spare_.capacity()) * sizeof(std::uint32_t) + band_.capacity() * sizeof(float) +
+               prefix_.capacity() * sizeof(std::uint64_t);
+    }
+
+private:
+    // The deviations' bracket from the histogram (prefix_ built): d_lo the largest d with at
+    // most k values possibly within med +- d (-1: none), d_hi the smallest with at least k2 + 1
+    // surely within (HUGE_VAL: none), each by bisection on bucket counts.
+    void deviation_bracket(double med, std::size_t k, std::size_t k2, double& d_lo, double& d_hi) const {
+        const std::vector<std::uint64_t>& prefix = prefix_;
         std::size_t top = buckets;
         while (top > 0 && hist_[top - 1] == 0) --top;
         const double hi = top < buckets ? static_cast<double>(lower_edge(static_cast<std::uint32_t>(top))) : HUGE_VAL;
@@ -378,8 +394,6 @@ public:
             return br < bl ? 0 : prefix[static_cast<std::size_t>(br) + 1] - prefix[static_cast<std::size_t>(bl)];
         };
         const double dmax = std::isfinite(hi) ? std::max(med, hi - med) * 2.0 + 1.0 : HUGE_VAL;
-        // d_lo: largest d with outer count <= k (so the k-th deviation is above it).
-        double d_lo = -1.0;
         if (range(0.0, true) <= k && std::isfinite(dmax)) {
             double a = 0.0, b = dmax;
             for (int it = 0; it < 80; ++it) {
@@ -388,8 +402,6 @@ public:
             }
             d_lo = a;
         }
-        // d_hi: smallest d with inner count >= k2 + 1.
-        double d_hi = HUGE_VAL;
         if (std::isfinite(dmax) && range(dmax, false) >= k2 + 1) {
             double a = std::max(d_lo, 0.0), b = dmax;
             for (int it = 0; it < 80; ++it) {
@@ -398,26 +410,32 @@ public:
             }
             d_hi = b;
         }
-        // In float terms: |x - med| <= d_lo exactly when x lies in [in_lo, in_hi] (the
-        // bounds rounded inwards), and every deviation in (d_lo, d_hi] has its x in
-        // [out_lo, out_hi] (rounded outwards). Values collected beyond d_hi rank above the
-        // answer and do no harm.
-        const double a_lo = med - d_lo, a_hi = med + d_lo, b_lo = med - d_hi, b_hi = med + d_hi;
-        auto up = [](double x) {  // smallest float >= x
-            if (!(x > -3.4e38)) return -HUGE_VALF;
-            if (!(x < 3.4e38)) return HUGE_VALF;
-            float f = static_cast<float>(x);
-            return static_cast<double>(f) < x ? std::nextafter(f, HUGE_VALF) : f;
-        };
-        auto down = [](double x) {  // largest float <= x
-            if (!(x > -3.4e38)) return -HUGE_VALF;
-            if (!(x < 3.4e38)) return HUGE_VALF;
-            float f = static_cast<float>(x);
-            return static_cast<double>(f) > x ? std::nextafter(f, -HUGE_VALF) : f;
-        };
+    }
+
+    static float float_at_or_above(double x) noexcept {  // the smallest float >= x
+        if (!(x > -3.4e38)) return -HUGE_VALF;
+        if (!(x < 3.4e38)) return HUGE_VALF;
+        const float f = static_cast<float>(x);
+        return static_cast<double>(f) < x ? std::nextafter(f, HUGE_VALF) : f;
+    }
+    static float float_at_or_below(double x) noexcept {  // the largest float <= x
+        if (!(x > -3.4e38)) return -HUGE_VALF;
+        if (!(x < 3.4e38)) return HUGE_VALF;
+        const float f = static_cast<float>(x);
+        return static_cast<double>(f) > x ? std::nextafter(f, -HUGE_VALF) : f;
+    }
+
+    // The MAD from its bracket: in float terms |x - med| <= d_lo exactly when x lies in
+    // [in_lo, in_hi] (the bounds rounded inwards), and every deviation in (d_lo, d_hi] has its
+    // x in [out_lo, out_hi] (rounded outwards). One pass counts the first and collects the
+    // second; values collected beyond d_hi rank above the answer and do no harm.
+    double mad_in_bracket(const float* v, std::size_t n, double med, double d_lo, double d_hi, std::size_t k,
+                          std::size_t k2, std::vector<double>& scratch) const {
+        const std::vector<std::uint64_t>& prefix = prefix_;
         const bool has_inner = d_lo >= 0;
-        const float in_lo = has_inner ? up(a_lo) : 1.0f, in_hi = has_inner ? down(a_hi) : 0.0f;
-        const float out_lo = std::max(down(b_lo), 0.0f), out_hi = up(b_hi);
+        const float in_lo = has_inner ? float_at_or_above(med - d_lo) : 1.0f;
+        const float in_hi = has_inner ? float_at_or_below(med + d_lo) : 0.0f;
+        const float out_lo = std::max(float_at_or_below(med - d_hi), 0.0f), out_hi = float_at_or_above(med + d_hi);
         // The band holds at most the values of the buckets its two intervals touch.
         auto count_buckets = [&](float a, float b) -> std::size_t {
             if (!(a <= b)) return 0;
@@ -445,12 +463,6 @@ public:
         return 0.5 * a + 0.5 * b;
     }
 
-    std::size_t bytes() const noexcept {
-        return (hist_.capacity() + spare_.capacity()) * sizeof(std::uint32_t) + band_.capacity() * sizeof(float) +
-               prefix_.capacity() * sizeof(std::uint64_t);
-    }
-
-private:
     std::vector<std::uint32_t> hist_, spare_;
     mutable std::vector<float> band_;
     mutable std::vector<std::uint64_t> prefix_;

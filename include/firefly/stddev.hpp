@@ -432,124 +432,167 @@ std::size_t stddev_converted_rows(const image_view<C>& color, const image_view<V
     return negative_n;
 }
 
-// The pass over any layout.
+// What the pass counts, and how many leading pixels a kernel finished (roots and labels).
+struct pass_tally {
+    std::size_t negative = 0, nonfinite = 0, ignored = 0;
+    std::size_t finished = 0;
+};
+
+// Packed float views: the row kernels (by hand with SSE2 for RGB colour and variance reduced
+// by their mean). False, and nothing written, for other layouts.
 template <class C, class V, class A>
-stddev_counts stddev_pass(const image_view<C>& color, const image_view<V>& variance, const image_view<A>& alpha,
-                          variance_reduction how, float* sd, std::uint8_t* label) noexcept {
+bool stddev_packed_float(const image_view<C>& color, const image_view<V>& variance, const image_view<A>& alpha,
+                         variance_reduction how, float* sd, std::uint8_t* label, pass_tally& t) noexcept {
+    if constexpr (std::is_same_v<std::remove_cv_t<C>, float> && std::is_same_v<std::remove_cv_t<V>, float> &&
+                  std::is_same_v<std::remove_cv_t<A>, float>) {
+        const bool has_alpha = !alpha.empty();
+        if (!(color.is_packed() && variance.is_packed() && (!has_alpha || alpha.is_packed()))) return false;
+        const float* ap = has_alpha ? alpha.data() : nullptr;
+        const int cc = color.channels(), vc = variance.channels();
+        const std::size_t n = color.pixel_count();
+#if defined(__SSE2__) || defined(_M_X64)
+        if (cc == 3 && vc == 3 && how == variance_reduction::mean) {
+            // The first `finished` pixels by hand, roots and labels included; the tail by
+            // the generic kernel and the common finish (finish_stddev).
+            t.finished = ap ? stddev_rgb_mean_sse2<true>(color.data(), variance.data(), ap, n, sd, label, t.negative,
+                                                         t.nonfinite, t.ignored)
+                            : stddev_rgb_mean_sse2<false>(color.data(), variance.data(), ap, n, sd, label, t.negative,
+                                                          t.nonfinite, t.ignored);
+            t.negative += stddev_packed<3, 3>(color.data() + 3 * t.finished, variance.data() + 3 * t.finished,
+                                              ap ? ap + t.finished : nullptr, n - t.finished, how, sd + t.finished);
+            return true;
+        }
+#endif
+        if (cc == 3 && vc == 3) t.negative = stddev_packed<3, 3>(color.data(), variance.data(), ap, n, how, sd);
+        else if (cc == 3 && vc == 1) t.negative = stddev_packed<3, 1>(color.data(), variance.data(), ap, n, how, sd);
+        else if (cc == 4 && vc == 4) t.negative = stddev_packed<4, 4>(color.data(), variance.data(), ap, n, how, sd);
+        else if (cc == 4 && vc == 1) t.negative = stddev_packed<4, 1>(color.data(), variance.data(), ap, n, how, sd);
+        else return false;
+        return true;
+    } else {
+        (void)color, (void)variance, (void)alpha, (void)how, (void)sd, (void)label, (void)t;
+        return false;
+    }
+}
+
+// Colour or variance of a type that converts whole rows to float (a renderer's half), packed:
+// each row is converted into a scratch row and the packed float kernel runs on it. Alpha:
+// packed float, or none. False, and nothing written, for other layouts.
+template <class C, class V, class A>
+bool stddev_float_rows(const image_view<C>& color, const image_view<V>& variance, const image_view<A>& alpha,
+                       variance_reduction how, float* sd, pass_tally& t) {
+    if constexpr (float_rows_v<C> && float_rows_v<V> &&
+                  !(std::is_same_v<std::remove_cv_t<C>, float> && std::is_same_v<std::remove_cv_t<V>, float>)) {
+        constexpr bool float_alpha = std::is_same_v<std::remove_cv_t<A>, float>;
+        const int cc = color.channels(), vc = variance.channels();
+        const bool has_alpha = !alpha.empty();
+        if (!(color.is_packed() && variance.is_packed() && (!has_alpha || (float_alpha && alpha.is_packed())) &&
+              (cc == 3 || cc == 4) && (vc == 1 || vc == cc)))
+            return false;
+        const float* ap = nullptr;
+        if constexpr (float_alpha) ap = has_alpha ? alpha.data() : nullptr;
+        t.negative = stddev_converted_rows(color, variance, ap, how, sd);
+        return true;
+    } else {
+        (void)color, (void)variance, (void)alpha, (void)how, (void)sd, (void)t;
+        return false;
+    }
+}
+
+// Any layout and channel type, one pixel at a time: the values (as float for float arithmetic,
+// labels then follow from them in finish_stddev) and, written here, the labels.
+template <class C, class V, class A>
+void stddev_strided(const image_view<C>& color, const image_view<V>& variance, const image_view<A>& alpha,
+                    variance_reduction how, float* sd, std::uint8_t* label, pass_tally& t) noexcept {
     using R = sd_arith<C>;
     using ct = channel_traits<std::remove_cv_t<C>>;
     using vt = channel_traits<std::remove_cv_t<V>>;
     using at = channel_traits<std::remove_cv_t<A>>;
-    stddev_counts counts;
+    using I1 = std::integral_constant<int, 1>;
+    using I2 = std::integral_constant<int, 2>;
+    using I3 = std::integral_constant<int, 3>;
     const int w = color.width(), h = color.height();
     const int nc = colour_channels(color.channels());
     const int nv = variance.channels() == 1 ? 1 : nc;
     const int cc = color.channels(), vc = variance.channels();
     const bool has_alpha = !alpha.empty();
-    const std::size_t n = color.pixel_count();
-    std::size_t negative_n = 0, nonfinite_n = 0, ignored_n = 0;
-    std::size_t finished = 0;  // pixels whose roots and labels are already final
-    bool done = false;
-    if constexpr (std::is_same_v<std::remove_cv_t<C>, float> && std::is_same_v<std::remove_cv_t<V>, float> &&
-                  std::is_same_v<std::remove_cv_t<A>, float>) {
-        const bool packed = color.is_packed() && variance.is_packed() && (!has_alpha || alpha.is_packed());
-        const float* ap = has_alpha ? alpha.data() : nullptr;
-        done = packed;
-#if defined(__SSE2__) || defined(_M_X64)
-        if (packed && cc == 3 && vc == 3 && how == variance_reduction::mean) {
-            // The first `finished` pixels by hand, roots and labels included; the tail by
-            // the generic kernel and the common finish below.
-            finished = ap ? stddev_rgb_mean_sse2<true>(color.data(), variance.data(), ap, n, sd, label, negative_n,
-                                                       nonfinite_n, ignored_n)
-                          : stddev_rgb_mean_sse2<false>(color.data(), variance.data(), ap, n, sd, label, negative_n,
-                                                        nonfinite_n, ignored_n);
-            negative_n += stddev_packed<3, 3>(color.data() + 3 * finished, variance.data() + 3 * finished,
-                                              ap ? ap + finished : nullptr, n - finished, how, sd + finished);
-        } else
-#endif
-        if (packed && cc == 3 && vc == 3) negative_n = stddev_packed<3, 3>(color.data(), variance.data(), ap, n, how, sd);
-        else if (packed && cc == 3 && vc == 1) negative_n = stddev_packed<3, 1>(color.data(), variance.data(), ap, n, how, sd);
-        else if (packed && cc == 4 && vc == 4) negative_n = stddev_packed<4, 4>(color.data(), variance.data(), ap, n, how, sd);
-        else if (packed && cc == 4 && vc == 1) negative_n = stddev_packed<4, 1>(color.data(), variance.data(), ap, n, how, sd);
-        else done = false;
-    }
-    if constexpr (float_rows_v<C> && float_rows_v<V> &&
-                  !(std::is_same_v<std::remove_cv_t<C>, float> && std::is_same_v<std::remove_cv_t<V>, float>)) {
-        // Colour or variance of a type that converts whole rows to float (a renderer's
-        // half): each row is converted into a scratch row and the packed float kernel runs
-        // on it. Alpha: packed float, or none.
-        constexpr bool float_alpha = std::is_same_v<std::remove_cv_t<A>, float>;
-        if (color.is_packed() && variance.is_packed() && (!has_alpha || (float_alpha && alpha.is_packed())) &&
-            (cc == 3 || cc == 4) && (vc == 1 || vc == cc)) {
-            const float* ap = nullptr;
-            if constexpr (float_alpha) ap = has_alpha ? alpha.data() : nullptr;
-            negative_n = stddev_converted_rows(color, variance, ap, how, sd);
-            done = true;
-        }
-    }
-    if (!done) {
-        const strided<C> cs(color);
-        const strided<V> vs(variance);
-        const strided<A> as(alpha);
-        using I1 = std::integral_constant<int, 1>;
-        using I2 = std::integral_constant<int, 2>;
-        using I3 = std::integral_constant<int, 3>;
-        for (int y = 0; y < h; ++y) {
-            const C* crow = cs.p + y * cs.y;
-            const V* vrow = vs.p + y * vs.y;
-            const A* arow = has_alpha ? as.p + y * as.y : nullptr;
-            const std::size_t base = static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
-            for (int x = 0; x < w; ++x) {
-                const C* cp = crow + x * cs.x;
-                const V* vp = vrow + x * vs.x;
-                R c[3] = {0, 0, 0}, v[3] = {0, 0, 0};
-                for (int k = 0; k < nc; ++k) c[k] = static_cast<R>(ct::load(cp[k * cs.c]));
-                for (int k = 0; k < nv; ++k) v[k] = static_cast<R>(vt::load(vp[k * vs.c]));
-                for (int k = 3; k < cc; ++k) {  // beyond colour: only finiteness counts (as packed)
-                    const R e = static_cast<R>(ct::load(cp[k * cs.c]));
-                    c[0] += e - e;
-                }
-                for (int k = 3; k < vc; ++k) {
-                    const R e = static_cast<R>(vt::load(vp[k * vs.c]));
-                    v[0] += e - e;
-                }
-                const R a = has_alpha ? static_cast<R>(at::load(arow[x * as.x])) : R(1);
-                bool negative = false;
-                std::uint8_t& l = label[base + static_cast<std::size_t>(x)];
-                // The channel counts become template arguments: the same formula as packed.
-                auto run = [&](auto nc_c, auto nv_c) {
-                    constexpr int NC = decltype(nc_c)::value, NV = decltype(nv_c)::value;
-                    return has_alpha ? classify_pixel<NC, NV, true>(how, c, v, a, l, negative)
-                                     : classify_pixel<NC, NV, false>(how, c, v, a, l, negative);
-                };
-                R value;
-                if (nc == 3) value = nv == 1 ? run(I3{}, I1{}) : run(I3{}, I3{});
-                else if (nc == 2) value = nv == 1 ? run(I2{}, I1{}) : run(I2{}, I2{});
-                else value = run(I1{}, I1{});
-                sd[base + static_cast<std::size_t>(x)] = store_value(value);
-                negative_n += negative;
+    const strided<C> cs(color);
+    const strided<V> vs(variance);
+    const strided<A> as(alpha);
+    for (int y = 0; y < h; ++y) {
+        const C* crow = cs.p + y * cs.y;
+        const V* vrow = vs.p + y * vs.y;
+        const A* arow = has_alpha ? as.p + y * as.y : nullptr;
+        const std::size_t base = static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
+        for (int x = 0; x < w; ++x) {
+            const C* cp = crow + x * cs.x;
+            const V* vp = vrow + x * vs.x;
+            R c[3] = {0, 0, 0}, v[3] = {0, 0, 0};
+            for (int k = 0; k < nc; ++k) c[k] = static_cast<R>(ct::load(cp[k * cs.c]));
+            for (int k = 0; k < nv; ++k) v[k] = static_cast<R>(vt::load(vp[k * vs.c]));
+            for (int k = 3; k < cc; ++k) {  // beyond colour: only finiteness counts (as packed)
+                const R e = static_cast<R>(ct::load(cp[k * cs.c]));
+                c[0] += e - e;
             }
+            for (int k = 3; k < vc; ++k) {
+                const R e = static_cast<R>(vt::load(vp[k * vs.c]));
+                v[0] += e - e;
+            }
+            const R a = has_alpha ? static_cast<R>(at::load(arow[x * as.x])) : R(1);
+            bool negative = false;
+            std::uint8_t& l = label[base + static_cast<std::size_t>(x)];
+            // The channel counts become template arguments: the same formula as packed.
+            auto run = [&](auto nc_c, auto nv_c) {
+                constexpr int NC = decltype(nc_c)::value, NV = decltype(nv_c)::value;
+                return has_alpha ? classify_pixel<NC, NV, true>(how, c, v, a, l, negative)
+                                 : classify_pixel<NC, NV, false>(how, c, v, a, l, negative);
+            };
+            R value;
+            if (nc == 3) value = nv == 1 ? run(I3{}, I1{}) : run(I3{}, I3{});
+            else if (nc == 2) value = nv == 1 ? run(I2{}, I1{}) : run(I2{}, I2{});
+            else value = run(I1{}, I1{});
+            sd[base + static_cast<std::size_t>(x)] = store_value(value);
+            t.negative += negative;
         }
     }
+}
+
+// After any layout's values: in float arithmetic the labels follow from the stored values
+// (past the pixels a kernel finished), then the square roots; otherwise the labels are
+// written, and counted here.
+template <class R>
+void finish_stddev(std::size_t n, float* sd, std::uint8_t* label, pass_tally& t) noexcept {
     if constexpr (std::is_same_v<R, float>) {
-        // Labels follow from the stored values; then the square roots.
-        for (std::size_t i = finished; i < n; ++i) {
+        for (std::size_t i = t.finished; i < n; ++i) {
             const std::uint8_t l = label_of(sd[i]);
             label[i] = l;
-            nonfinite_n += l >> 1;
-            ignored_n += l & 1u;
+            t.nonfinite += l >> 1;
+            t.ignored += l & 1u;
         }
-        sqrt_nonnegative(sd + finished, n - finished);
+        sqrt_nonnegative(sd + t.finished, n - t.finished);
     } else {
         for (std::size_t i = 0; i < n; ++i) {
-            nonfinite_n += (label[i] & 3) == 2;
-            ignored_n += (label[i] & 3) == 1;
+            t.nonfinite += (label[i] & 3) == 2;
+            t.ignored += (label[i] & 3) == 1;
         }
     }
-    counts.valid = n - nonfinite_n - ignored_n;
-    counts.ignored = ignored_n;
-    counts.nonfinite = nonfinite_n;
-    counts.negative_variance = negative_n;
+}
+
+// The pass over any layout: a packed kernel where one fits, else one pixel at a time.
+template <class C, class V, class A>
+stddev_counts stddev_pass(const image_view<C>& color, const image_view<V>& variance, const image_view<A>& alpha,
+                          variance_reduction how, float* sd, std::uint8_t* label) noexcept {
+    pass_tally t;
+    if (!stddev_packed_float(color, variance, alpha, how, sd, label, t) &&
+        !stddev_float_rows(color, variance, alpha, how, sd, t))
+        stddev_strided(color, variance, alpha, how, sd, label, t);
+    const std::size_t n = color.pixel_count();
+    finish_stddev<sd_arith<C>>(n, sd, label, t);
+    stddev_counts counts;
+    counts.valid = n - t.nonfinite - t.ignored;
+    counts.ignored = t.ignored;
+    counts.nonfinite = t.nonfinite;
+    counts.negative_variance = t.negative;
     return counts;
 }
 
