@@ -242,3 +242,37 @@ TEST_CASE("enum options outside their enumerators are errors", "[cross_half][err
     o.lambdas = static_cast<lambda_method>(3);
     CHECK(check_options(o).code() == errc::invalid_argument);
 }
+
+TEST_CASE("the blend's variance stays finite where the spatial estimate's bias overflows", "[cross_half][numerics]") {
+    // Found by fuzz_buffers (tests/fuzz/regressions/buffers/variance_nan_where_the_bias_overflowed):
+    // the other half's neighbours 1e151 above its pixel make the spatial estimate's squared
+    // bias ~1e302, finite, but at a calibration of 1e-8 it overflows in renderer units, while
+    // the spatial weight a = 2 vB / (MSE(S) + vB) ~ 1e-186 stays positive and a^2 underflows
+    // to 0: a^2 (var + bias^2) was 0 x Inf = NaN. The term is a^2 bias^2 ~ 1e-62 here.
+    const int w = 3, h = 3;
+    std::vector<double> col[2], var[2];
+    for (int half = 0; half < 2; ++half) {
+        col[half].assign(static_cast<std::size_t>(w) * h * 3, half ? 1e151 : 2.0);
+        var[half].assign(col[half].size(), 1.0);
+    }
+    for (int c = 0; c < 3; ++c) {
+        col[1][(1 * w + 1) * 3 + c] = 0.5;     // the other half's value at the pixel
+        var[1][(1 * w + 1) * 3 + c] = 1e124;   // ... and its variance
+        col[0][(1 * w + 1) * 3 + c] = 1e300;   // the firefly
+    }
+    const half_views<double, double> own{*make_image_view<const double>(col[0].data(), w, h, 3),
+                                         *make_image_view<const double>(var[0].data(), w, h, 3)};
+    const half_views<double, double> other{*make_image_view<const double>(col[1].data(), w, h, 3),
+                                           *make_image_view<const double>(var[1].data(), w, h, 3)};
+    detail::gaussian_kernel k;
+    k.set(3, 1.0);
+    auto clean = [](int xx, int yy) { return xx != 1 || yy != 1; };
+    double out[6];
+    const double a = detail::cross_half_estimate(own, other, k, 1e-8, true, 1, 1, clean, clean, out);
+    CHECK(a > 0.0);
+    CHECK(a < 1e-150);
+    for (int c = 0; c < 3; ++c) {
+        CHECK(std::isfinite(out[c]));
+        CHECK(out[3 + c] == Approx(1e124).epsilon(1e-9));  // (1 - a)^2 vB, the rest ~1e-62
+    }
+}

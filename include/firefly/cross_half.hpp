@@ -56,7 +56,7 @@ double cross_half_estimate(const half_views<C, V>& own, const half_views<C, V>& 
     double xo[4], vo[4];
     for (int c = 0; c < nc; ++c) xo[c] = other.color.load(x, y, c);
     for (int c = 0; c < nv; ++c) vo[c] = std::max(other.variance.load(x, y, c), 0.0);
-    double a = 0.0;
+    double a = 0.0, bias_term = 0.0;  // bias_term: a^2 times the squared bias, per channel
     double s[8] = {}, vs[8] = {};  // [0, n): own half, [n, 2n): other half
     // Both halves' channels side by side; RGB (6 values) at compile time. `mine` is the half
     // the spatial estimate comes from: the own half, or the other one where no neighbour of
@@ -103,12 +103,16 @@ double cross_half_estimate(const half_views<C, V>& own, const half_views<C, V>& 
             const double den = mse_s + v_other;
             a = den > 0 && std::isfinite(den) ? std::min(1.0, 2.0 * v_other / den) : 0.0;
             if (!(a >= 0)) a = 0.0;
-            const double bias2 = std::max(miss, 0.0) / (nd * calibration);  // per channel, renderer units
-            for (int c = 0; c < nv; ++c) vs[c] += bias2;
+            // a^2 miss / (nd calibration), per channel in renderer units, taken in this order:
+            // the squared bias alone may overflow (a calibration of 1e-8, a bias of 1e151) where
+            // a is ~1e-186 and a^2 underflows, and 0 x Inf was a NaN variance. a (a miss) <=
+            // miss, and a^2 miss <= v_other, so every step is finite.
+            bias_term = a * (a * std::max(miss, 0.0)) / (nd * calibration);
         }
     }
     for (int c = 0; c < nc; ++c) out[c] = a > 0 ? a * s[c] + (1 - a) * xo[c] : xo[c];
-    for (int c = 0; c < nv; ++c) out[nc + c] = a > 0 ? a * a * vs[c] + (1 - a) * (1 - a) * vo[c] : vo[c];
+    for (int c = 0; c < nv; ++c)
+        out[nc + c] = a > 0 ? a * a * vs[c] + bias_term + (1 - a) * (1 - a) * vo[c] : vo[c];
     return a;
 }
 
