@@ -432,17 +432,12 @@ std::size_t stddev_converted_rows(const image_view<C>& color, const image_view<V
     return negative_n;
 }
 
-// What the pass counts, and how many leading pixels a kernel finished (roots and labels).
-struct pass_tally {
-    std::size_t negative = 0, nonfinite = 0, ignored = 0;
-    std::size_t finished = 0;
-};
-
 // Packed float views: the row kernels (by hand with SSE2 for RGB colour and variance reduced
 // by their mean). False, and nothing written, for other layouts.
 template <class C, class V, class A>
 bool stddev_packed_float(const image_view<C>& color, const image_view<V>& variance, const image_view<A>& alpha,
-                         variance_reduction how, float* sd, std::uint8_t* label, pass_tally& t) noexcept {
+                         variance_reduction how, float* sd, std::uint8_t* label, stddev_counts& t,
+                         std::size_t& finished) noexcept {
     if constexpr (std::is_same_v<std::remove_cv_t<C>, float> && std::is_same_v<std::remove_cv_t<V>, float> &&
                   std::is_same_v<std::remove_cv_t<A>, float>) {
         const bool has_alpha = !alpha.empty();
@@ -454,23 +449,23 @@ bool stddev_packed_float(const image_view<C>& color, const image_view<V>& varian
         if (cc == 3 && vc == 3 && how == variance_reduction::mean) {
             // The first `finished` pixels by hand, roots and labels included; the tail by
             // the generic kernel and the common finish (finish_stddev).
-            t.finished = ap ? stddev_rgb_mean_sse2<true>(color.data(), variance.data(), ap, n, sd, label, t.negative,
-                                                         t.nonfinite, t.ignored)
-                            : stddev_rgb_mean_sse2<false>(color.data(), variance.data(), ap, n, sd, label, t.negative,
-                                                          t.nonfinite, t.ignored);
-            t.negative += stddev_packed<3, 3>(color.data() + 3 * t.finished, variance.data() + 3 * t.finished,
-                                              ap ? ap + t.finished : nullptr, n - t.finished, how, sd + t.finished);
+            finished = ap ? stddev_rgb_mean_sse2<true>(color.data(), variance.data(), ap, n, sd, label,
+                                                       t.negative_variance, t.nonfinite, t.ignored)
+                          : stddev_rgb_mean_sse2<false>(color.data(), variance.data(), ap, n, sd, label,
+                                                        t.negative_variance, t.nonfinite, t.ignored);
+            t.negative_variance += stddev_packed<3, 3>(color.data() + 3 * finished, variance.data() + 3 * finished,
+                                                       ap ? ap + finished : nullptr, n - finished, how, sd + finished);
             return true;
         }
 #endif
-        if (cc == 3 && vc == 3) t.negative = stddev_packed<3, 3>(color.data(), variance.data(), ap, n, how, sd);
-        else if (cc == 3 && vc == 1) t.negative = stddev_packed<3, 1>(color.data(), variance.data(), ap, n, how, sd);
-        else if (cc == 4 && vc == 4) t.negative = stddev_packed<4, 4>(color.data(), variance.data(), ap, n, how, sd);
-        else if (cc == 4 && vc == 1) t.negative = stddev_packed<4, 1>(color.data(), variance.data(), ap, n, how, sd);
+        if (cc == 3 && vc == 3) t.negative_variance = stddev_packed<3, 3>(color.data(), variance.data(), ap, n, how, sd);
+        else if (cc == 3 && vc == 1) t.negative_variance = stddev_packed<3, 1>(color.data(), variance.data(), ap, n, how, sd);
+        else if (cc == 4 && vc == 4) t.negative_variance = stddev_packed<4, 4>(color.data(), variance.data(), ap, n, how, sd);
+        else if (cc == 4 && vc == 1) t.negative_variance = stddev_packed<4, 1>(color.data(), variance.data(), ap, n, how, sd);
         else return false;
         return true;
     } else {
-        (void)color, (void)variance, (void)alpha, (void)how, (void)sd, (void)label, (void)t;
+        (void)color, (void)variance, (void)alpha, (void)how, (void)sd, (void)label, (void)t, (void)finished;
         return false;
     }
 }
@@ -480,7 +475,7 @@ bool stddev_packed_float(const image_view<C>& color, const image_view<V>& varian
 // packed float, or none. False, and nothing written, for other layouts.
 template <class C, class V, class A>
 bool stddev_float_rows(const image_view<C>& color, const image_view<V>& variance, const image_view<A>& alpha,
-                       variance_reduction how, float* sd, pass_tally& t) {
+                       variance_reduction how, float* sd, stddev_counts& t) {
     if constexpr (float_rows_v<C> && float_rows_v<V> &&
                   !(std::is_same_v<std::remove_cv_t<C>, float> && std::is_same_v<std::remove_cv_t<V>, float>)) {
         constexpr bool float_alpha = std::is_same_v<std::remove_cv_t<A>, float>;
@@ -491,7 +486,7 @@ bool stddev_float_rows(const image_view<C>& color, const image_view<V>& variance
             return false;
         const float* ap = nullptr;
         if constexpr (float_alpha) ap = has_alpha ? alpha.data() : nullptr;
-        t.negative = stddev_converted_rows(color, variance, ap, how, sd);
+        t.negative_variance = stddev_converted_rows(color, variance, ap, how, sd);
         return true;
     } else {
         (void)color, (void)variance, (void)alpha, (void)how, (void)sd, (void)t;
@@ -503,7 +498,7 @@ bool stddev_float_rows(const image_view<C>& color, const image_view<V>& variance
 // labels then follow from them in finish_stddev) and, written here, the labels.
 template <class C, class V, class A>
 void stddev_strided(const image_view<C>& color, const image_view<V>& variance, const image_view<A>& alpha,
-                    variance_reduction how, float* sd, std::uint8_t* label, pass_tally& t) noexcept {
+                    variance_reduction how, float* sd, std::uint8_t* label, stddev_counts& t) noexcept {
     using R = sd_arith<C>;
     using ct = channel_traits<std::remove_cv_t<C>>;
     using vt = channel_traits<std::remove_cv_t<V>>;
@@ -552,47 +547,43 @@ void stddev_strided(const image_view<C>& color, const image_view<V>& variance, c
             else if (nc == 2) value = nv == 1 ? run(I2{}, I1{}) : run(I2{}, I2{});
             else value = run(I1{}, I1{});
             sd[base + static_cast<std::size_t>(x)] = store_value(value);
-            t.negative += negative;
+            t.negative_variance += negative;
         }
     }
 }
 
 // After any layout's values: in float arithmetic the labels follow from the stored values
-// (past the pixels a kernel finished), then the square roots; otherwise the labels are
-// written, and counted here.
+// (past the `finished` pixels a kernel completed, roots and labels), then the square roots;
+// otherwise the labels are written, and counted here. Then the valid count.
 template <class R>
-void finish_stddev(std::size_t n, float* sd, std::uint8_t* label, pass_tally& t) noexcept {
+void finish_stddev(std::size_t n, float* sd, std::uint8_t* label, std::size_t finished, stddev_counts& t) noexcept {
     if constexpr (std::is_same_v<R, float>) {
-        for (std::size_t i = t.finished; i < n; ++i) {
+        for (std::size_t i = finished; i < n; ++i) {
             const std::uint8_t l = label_of(sd[i]);
             label[i] = l;
             t.nonfinite += l >> 1;
             t.ignored += l & 1u;
         }
-        sqrt_nonnegative(sd + t.finished, n - t.finished);
+        sqrt_nonnegative(sd + finished, n - finished);
     } else {
         for (std::size_t i = 0; i < n; ++i) {
             t.nonfinite += (label[i] & 3) == 2;
             t.ignored += (label[i] & 3) == 1;
         }
     }
+    t.valid = n - t.nonfinite - t.ignored;
 }
 
 // The pass over any layout: a packed kernel where one fits, else one pixel at a time.
 template <class C, class V, class A>
 stddev_counts stddev_pass(const image_view<C>& color, const image_view<V>& variance, const image_view<A>& alpha,
                           variance_reduction how, float* sd, std::uint8_t* label) noexcept {
-    pass_tally t;
-    if (!stddev_packed_float(color, variance, alpha, how, sd, label, t) &&
-        !stddev_float_rows(color, variance, alpha, how, sd, t))
-        stddev_strided(color, variance, alpha, how, sd, label, t);
-    const std::size_t n = color.pixel_count();
-    finish_stddev<sd_arith<C>>(n, sd, label, t);
     stddev_counts counts;
-    counts.valid = n - t.nonfinite - t.ignored;
-    counts.ignored = t.ignored;
-    counts.nonfinite = t.nonfinite;
-    counts.negative_variance = t.negative;
+    std::size_t finished = 0;  // pixels whose roots and labels a kernel already wrote
+    if (!stddev_packed_float(color, variance, alpha, how, sd, label, counts, finished) &&
+        !stddev_float_rows(color, variance, alpha, how, sd, counts))
+        stddev_strided(color, variance, alpha, how, sd, label, counts);
+    finish_stddev<sd_arith<C>>(color.pixel_count(), sd, label, finished, counts);
     return counts;
 }
 
