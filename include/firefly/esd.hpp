@@ -196,9 +196,6 @@ struct compensated {
     double value() const noexcept { return sum + c; }
 };
 
-}  // namespace detail
-
-namespace detail {
 // The m removals of the one-sided test, in order (indices and values), and the summary of
 // the values never removed. idx: the finite values' indices (reordered).
 template <class Val>
