@@ -8,7 +8,8 @@
 // a pixel-buffer whose mask has neither the firefly nor the nonfinite bit (or has left) keeps its variance
 // and any fourth colour channel bit for bit, and its first three colour channels either stay
 // or grow to a finite value (the energy return only adds light); a pixel-buffer whose input
-// colour was finite never comes out NaN, nor does any when the whole input was finite; the
+// colour was finite never comes out NaN, nor does any value come out NaN or Inf when the whole
+// input was finite; the
 // report counts what the masks mark (left: report.left, or K = 2's unreachable); detect() on a
 // copy reports the same and changes nothing.
 #include <firefly/buffers.hpp>
@@ -91,6 +92,7 @@ void check_pixel(const frame_shape& f, const image_storage<T>& col, const image_
     for (int c = 0; c < f.nc; ++c) {
         const T now = col.at(x, sy, c), was = col0.at(x, sy, c);
         if ((pixel_finite || finite) && std::isnan(static_cast<double>(now))) fail("NaN out of finite colour");
+        if (finite && std::isinf(static_cast<double>(now))) fail("Inf colour out of finite input");
         const bool grew = c < 3 && now >= was && std::isfinite(static_cast<double>(now));
         if (!marked && !same_bits(now, was) && !grew) {
             std::fprintf(stderr, "K %d %dx%d: pixel (%d, %d) channel %d: %.9g -> %.9g, mask %d\n", f.k, f.w, f.h, x, y,
@@ -101,7 +103,7 @@ void check_pixel(const frame_shape& f, const image_storage<T>& col, const image_
     for (int c = 0; c < f.nv; ++c) {
         const T now = var.at(x, vy, c), was = var0.at(x, vy, c);
         if (!marked && !same_bits(now, was)) fail("an unmarked pixel's variance changed");
-        if (finite && std::isnan(static_cast<double>(now))) fail("NaN variance out of finite input");
+        if (finite && !std::isfinite(static_cast<double>(now))) fail("NaN or Inf variance out of finite input");
     }
 }
 

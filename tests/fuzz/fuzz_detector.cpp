@@ -6,8 +6,8 @@
 // Asserts: no crash; pixels whose mask has neither the firefly nor the nonfinite bit, or has
 // the left bit, are bit-identical to the input (colour, variance, alpha), except that the energy bit lets the
 // first three colour channels grow (the energy return only adds light); alpha is never
-// written; a frame whose inputs are all finite gives no NaN, and no pixel whose input colour
-// was finite comes out NaN.
+// written; a frame whose inputs are all finite gives no NaN or Inf, and no pixel whose input
+// colour was finite comes out NaN.
 #include <firefly/firefly.hpp>
 #include <fuzzer/FuzzedDataProvider.h>
 
@@ -137,8 +137,8 @@ void check_frame(const frame_shape& f, const int (&nch)[3], half_storage<T> (&s)
                                          y, k, c, m, r.error.message());
                             fail("an unmarked pixel changed");
                         }
-                        if (finite && std::isnan(static_cast<double>(now)))
-                            fail("NaN out of finite input");
+                        if (finite && !std::isfinite(static_cast<double>(now)))
+                            fail("NaN or Inf out of finite input");
                     }
             }
 }
