@@ -152,3 +152,69 @@ TEST_CASE("accumulator: views go straight to the detector; errors as status", "[
     CHECK(r.per_buffer[1] >= 1);
     CHECK(acc.color(1)(3, 4) < 1.0f);
 }
+
+// Property: on random sample streams (magnitudes from denormals to 1e30, both signs, zeros,
+// FLT_MAX, nearly constant runs), every buffer's mean and variance of the mean agree with a
+// two-pass reference in long double: the mean to float rounding, the variance to float
+// rounding plus Welford's own error (a few ulps of the sum of squares per sample); the
+// variance is never negative, never NaN, and finite (FLT_MAX at most) for finite samples.
+TEST_CASE("accumulator: random streams agree with a two-pass reference", "[accumulator][property]") {
+    std::uint64_t state = 0x9e3779b97f4a7c15ull;
+    auto next = [&state] {  // splitmix64
+        std::uint64_t z = (state += 0x9e3779b97f4a7c15ull);
+        z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+        z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+        return z ^ (z >> 31);
+    };
+    auto uniform = [&next] { return static_cast<double>(next() >> 11) * 0x1.0p-53; };
+    auto draw = [&](float base) -> float {
+        switch (next() % 8) {
+        case 0: return 0.0f;
+        case 1: return std::numeric_limits<float>::denorm_min() * static_cast<float>(1 + next() % 1000);
+        case 2: return static_cast<float>(std::pow(10.0, -30.0 + 60.0 * uniform()));
+        case 3: return -static_cast<float>(std::pow(10.0, -5.0 + 10.0 * uniform()));
+        case 4: return next() % 50 == 0 ? FLT_MAX : base;
+        default: return base * static_cast<float>(1.0 + 1e-6 * (uniform() - 0.5));  // nearly constant
+        }
+    };
+    for (int trial = 0; trial < 200; ++trial) {
+        const int k = 2 + static_cast<int>(next() % 7), nc = 1 + static_cast<int>(next() % 4);
+        const int samples = static_cast<int>(next() % 41);
+        sample_accumulator acc;
+        REQUIRE(acc.reset(1, 1, k, nc).ok());
+        std::vector<std::vector<float>> by_buffer(static_cast<std::size_t>(k * nc));
+        const float base = static_cast<float>(std::pow(10.0, -3.0 + 6.0 * uniform()));
+        for (int s = 0; s < samples; ++s) {
+            float v[4];
+            for (int c = 0; c < nc; ++c) {
+                v[c] = draw(base);
+                by_buffer[static_cast<std::size_t>((s % k) * nc + c)].push_back(v[c]);
+            }
+            REQUIRE(acc.add(0, 0, static_cast<std::uint64_t>(s), v).ok());
+        }
+        acc.finish();
+        for (int b = 0; b < k; ++b)
+            for (int c = 0; c < nc; ++c) {
+                const std::vector<float>& x = by_buffer[static_cast<std::size_t>(b * nc + c)];
+                const long double n = static_cast<long double>(x.size());
+                long double sum = 0, sq = 0, ss = 0;
+                for (float v : x) sum += v;
+                const long double mean = x.empty() ? 0 : sum / n;
+                for (float v : x) {
+                    sq += (v - mean) * (v - mean);
+                    ss += static_cast<long double>(v) * v;
+                }
+                const long double want = x.size() >= 2 ? sq / (n - 1) / n : mean * mean;
+                const double got_mean = acc.color(b)(0, 0, c), got_var = acc.variance(b)(0, 0, c);
+                INFO("trial " << trial << " K " << k << " buffer " << b << " channel " << c << " n " << x.size());
+                CHECK(acc.samples(b, 0, 0) == x.size());
+                CHECK(std::fabs(got_mean - static_cast<double>(mean)) <=
+                      1e-6 * std::fabs(static_cast<double>(mean)) + 1e-12 * std::sqrt(static_cast<double>(ss / std::max(n, 1.0L))) + 1e-45);
+                REQUIRE(std::isfinite(got_var));
+                CHECK(got_var >= 0.0);
+                const double expect = static_cast<double>(std::min(want, static_cast<long double>(FLT_MAX)));
+                const double welford = x.size() >= 2 ? 16.0 * DBL_EPSILON * static_cast<double>(ss / (n - 1)) : 0.0;
+                CHECK(std::fabs(got_var - expect) <= 1e-6 * expect + welford + 1e-45);
+            }
+    }
+}
