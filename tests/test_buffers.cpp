@@ -232,6 +232,25 @@ TEST_CASE("K buffers: NaN in one buffer is repaired from the others", "[buffers]
     CHECK(std::isfinite(f.variance[0][at + 3]));
 }
 
+TEST_CASE("K buffers: a buffer rebuilt from double values near DBL_MAX stays finite", "[buffers][numerics]") {
+    // The mean of the clean buffers was their plain sum over n: two at DBL_MAX summed to inf.
+    // The sums are now taken again at overflow_scale (kernel.hpp) where they overflow.
+    const int w = 4, h = 4, k = 4;
+    std::vector<std::vector<double>> color(k, std::vector<double>(static_cast<std::size_t>(w) * h * 3, DBL_MAX));
+    std::vector<buffer_view<double>> views;
+    for (auto& c : color) views.push_back({*make_image_view(c.data(), w, h, 3), {}});
+    const std::size_t at = (2 * w + 1) * 3;
+    color[1][at] = std::numeric_limits<double>::quiet_NaN();
+    cross_buffer_detector d;
+    const cross_buffer_report r = d.process(views);
+    INFO(r.error.message());
+    REQUIRE(r.ok());
+    CHECK(r.nonfinite == 1);
+    CHECK(color[1][at] == DBL_MAX);  // the mean of three DBL_MAX, held within the finite range
+    for (const auto& c : color)
+        for (double v : c) CHECK(std::isfinite(v));
+}
+
 TEST_CASE("K buffers: more than half non-finite is left and reported", "[buffers]") {
     frame_k f = noisy_frame(4, 6, 6, 4);
     for (int b = 0; b < 3; ++b) f.color[static_cast<std::size_t>(b)][0] = std::numeric_limits<float>::quiet_NaN();

@@ -29,6 +29,20 @@ double region_relmse(const sim::frame& f, const std::vector<float>* col, int x0,
             }
     return sim::relmse(img.data(), ref.data(), img.size() / 3);
 }
+// The cross-half estimate of the centre of 3x3 RGB double halves (col[0] its own half,
+// col[1] the other), every other pixel clean, with a 3x3 kernel of sigma 1; returns a.
+double centre_estimate(const std::vector<double> (&col)[2], const std::vector<double> (&var)[2], double calibration,
+                       double* out) {
+    const half_views<double, double> own{*make_image_view<const double>(col[0].data(), 3, 3, 3),
+                                         *make_image_view<const double>(var[0].data(), 3, 3, 3)};
+    const half_views<double, double> other{*make_image_view<const double>(col[1].data(), 3, 3, 3),
+                                           *make_image_view<const double>(var[1].data(), 3, 3, 3)};
+    detail::gaussian_kernel k;
+    k.set(3, 1.0);
+    auto clean = [](int xx, int yy) { return xx != 1 || yy != 1; };
+    return detail::cross_half_estimate(own, other, k, calibration, true, 1, 1, clean, clean, out);
+}
+
 }  // namespace
 
 TEST_CASE("a one-half firefly on detail takes the other half's value, not its neighbours'", "[cross_half]") {
@@ -260,19 +274,43 @@ TEST_CASE("the blend's variance stays finite where the spatial estimate's bias o
         var[1][(1 * w + 1) * 3 + c] = 1e124;   // ... and its variance
         col[0][(1 * w + 1) * 3 + c] = 1e300;   // the firefly
     }
-    const half_views<double, double> own{*make_image_view<const double>(col[0].data(), w, h, 3),
-                                         *make_image_view<const double>(var[0].data(), w, h, 3)};
-    const half_views<double, double> other{*make_image_view<const double>(col[1].data(), w, h, 3),
-                                           *make_image_view<const double>(var[1].data(), w, h, 3)};
-    detail::gaussian_kernel k;
-    k.set(3, 1.0);
-    auto clean = [](int xx, int yy) { return xx != 1 || yy != 1; };
     double out[6];
-    const double a = detail::cross_half_estimate(own, other, k, 1e-8, true, 1, 1, clean, clean, out);
+    const double a = centre_estimate(col, var, 1e-8, out);
     CHECK(a > 0.0);
     CHECK(a < 1e-150);
     for (int c = 0; c < 3; ++c) {
         CHECK(std::isfinite(out[c]));
         CHECK(out[3 + c] == Approx(1e124).epsilon(1e-9));  // (1 - a)^2 vB, the rest ~1e-62
     }
+}
+
+TEST_CASE("the spatial estimate stays finite where double neighbours near DBL_MAX overflow its sums", "[cross_half][numerics]") {
+    // Found by fuzz_buffers (tests/fuzz/regressions/buffers/inf_where_double_sums_overflowed):
+    // the kernel adds opposite neighbours first, and two at -DBL_MAX made -inf, so a pixel
+    // rebuilt from finite data came out -inf. Their weighted mean is finite: the sums are now
+    // taken again at overflow_scale (kernel.hpp), and the colour and the variance are finite.
+    const int w = 3, h = 3;
+    std::vector<double> col[2], var[2];
+    for (int half = 0; half < 2; ++half) {
+        col[half].assign(static_cast<std::size_t>(w) * h * 3, half ? 4.0 : -DBL_MAX);
+        var[half].assign(col[half].size(), 1.0);
+    }
+    for (int c = 0; c < 3; ++c) col[0][(1 * w + 1) * 3 + c] = 1.0;  // the firefly's own value
+    double out[6];
+    // The other half agrees with its neighbours (no bias seen), so the spatial estimate is
+    // taken whole: the neighbours' mean, -DBL_MAX.
+    CHECK(centre_estimate(col, var, 1.0, out) == 1.0);
+    for (int c = 0; c < 3; ++c) {
+        CHECK(std::isfinite(out[c]));
+        CHECK(out[c] == Approx(-DBL_MAX).epsilon(1e-12));
+        CHECK(std::isfinite(out[3 + c]));
+        CHECK(out[3 + c] >= 0.0);
+    }
+    // The neighbours' variances at DBL_MAX too: their sum overflowed as well.
+    for (std::size_t i = 0; i < var[0].size(); ++i) var[0][i] = DBL_MAX;
+    const double a = centre_estimate(col, var, 1.0, out);
+    CHECK(a > 0.0);
+    CHECK(a < 1e-300);  // a spatial estimate that noisy is all but left out
+    for (int c = 0; c < 6; ++c) CHECK(std::isfinite(out[c]));
+    for (int c = 0; c < 3; ++c) CHECK(out[c] == Approx(a * -DBL_MAX + (1 - a) * 4.0));  // a S ~ -15
 }

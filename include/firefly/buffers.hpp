@@ -592,6 +592,11 @@ private:
         }
         const std::size_t s = static_cast<std::size_t>(i);
         p.level[s] = sum / ncol;
+        if (fin == 0.0 && !std::isfinite(sum)) {  // finite double channels near DBL_MAX (kernel.hpp)
+            sum = 0;
+            for (int c = 0; c < ncol; ++c) sum += b.color.load(x, y, c) * detail::overflow_scale;
+            p.level[s] = detail::from_overflow_scale(sum / ncol);
+        }
         p.rel_var[s] = std::numeric_limits<double>::quiet_NaN();
         if (has_var) {
             const bool one = b.variance.channels() == 1;
@@ -936,25 +941,37 @@ private:
         if constexpr (!std::is_const_v<C> && !std::is_const_v<V>) {
             const int nc = b[0].color.channels();
             const int nv = has_var ? b[0].variance.channels() : 0;
-            std::array<double, 4> col{}, var{};
+            std::array<double, 8> sum{};  // colour channels, then variance channels
             int n = 0;
-            for (int j = 0; j < p.usable; ++j) {
-                const int i = p.order[static_cast<std::size_t>(j)];
-                if (p.flagged[static_cast<std::size_t>(i)]) continue;
-                ++n;
-                for (int c = 0; c < nc; ++c) col[static_cast<std::size_t>(c)] += b[i].color.load(x, y, c);
-                for (int c = 0; c < nv; ++c) var[static_cast<std::size_t>(c)] += std::max(b[i].variance.load(x, y, c), 0.0);
-            }
+            auto add_clean = [&](double scale) {
+                n = 0;
+                for (int j = 0; j < p.usable; ++j) {
+                    const int i = p.order[static_cast<std::size_t>(j)];
+                    if (p.flagged[static_cast<std::size_t>(i)]) continue;
+                    ++n;
+                    for (int c = 0; c < nc; ++c) sum[static_cast<std::size_t>(c)] += b[i].color.load(x, y, c) * scale;
+                    for (int c = 0; c < nv; ++c)
+                        sum[static_cast<std::size_t>(nc + c)] += std::max(b[i].variance.load(x, y, c), 0.0) * scale;
+                }
+            };
+            add_clean(1.0);
+            std::array<double, 8> mean{};
+            const bool rescaled = !detail::all_finite(sum.data(), nc + nv);  // double values near DBL_MAX
+            if (rescaled) sum.fill(0.0), add_clean(detail::overflow_scale);
+            for (int c = 0; c < nc + nv; ++c)
+                mean[static_cast<std::size_t>(c)] = rescaled ? detail::from_overflow_scale(sum[static_cast<std::size_t>(c)] / n)
+                                                             : sum[static_cast<std::size_t>(c)] / n;
             for (int j = 0; j < p.usable && excess; ++j) {  // sorted order, finite buffers only
                 const int i = p.order[static_cast<std::size_t>(j)];
                 if (!p.flagged[static_cast<std::size_t>(i)]) continue;
-                for (int c = 0; c < 3; ++c)
-                    excess[c] += (b[i].color.load(x, y, c) - col[static_cast<std::size_t>(c)] / n) / p.k;
+                for (int c = 0; c < 3; ++c)  // (a difference of two values near DBL_MAX: held finite)
+                    excess[c] += std::clamp((b[i].color.load(x, y, c) - mean[static_cast<std::size_t>(c)]) / p.k,
+                                            -DBL_MAX / detail::max_buffers, DBL_MAX / detail::max_buffers);
             }
             for (int i = 0; i < p.k; ++i) {
                 if (!p.flagged[static_cast<std::size_t>(i)]) continue;
-                for (int c = 0; c < nc; ++c) b[i].color.store(x, y, c, col[static_cast<std::size_t>(c)] / n);
-                for (int c = 0; c < nv; ++c) b[i].variance.store(x, y, c, var[static_cast<std::size_t>(c)] / n);
+                for (int c = 0; c < nc; ++c) b[i].color.store(x, y, c, mean[static_cast<std::size_t>(c)]);
+                for (int c = 0; c < nv; ++c) b[i].variance.store(x, y, c, mean[static_cast<std::size_t>(nc + c)]);
             }
         }
     }

@@ -27,6 +27,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
 #include <type_traits>
 
@@ -44,6 +45,31 @@ struct half_views {
 
 namespace detail {
 
+// The spatial weight a = 2 vB / (MSE(S) + vB), clamped to [0, 1], from the normalised sums
+// (s, vs: the spatial half's channels, then the other half's) and the other half's pixel
+// (xo, vo); bias_term: a^2 times the squared bias, per channel in renderer units.
+inline double spatial_weight(const double* s, const double* vs, const double* xo, const double* vo, int nc, int nv,
+                             double calibration, double& bias_term) noexcept {
+    const int nd = nc < 3 ? nc : 3;  // colour channels that decide (a 4th is carried along)
+    double v_other = 0, var_s = 0, miss = 0;  // channel sums, variances of the mean
+    for (int c = 0; c < nd; ++c) {
+        const int j = nv == 1 ? 0 : c;
+        const double d = s[nc + c] - xo[c];
+        v_other += calibration * vo[j];
+        var_s += calibration * vs[j];
+        miss += d * d - calibration * (vo[j] + vs[nv + j]);
+    }
+    const double mse_s = var_s + std::max(miss, 0.0);
+    const double den = mse_s + v_other;
+    double a = den > 0 && std::isfinite(den) ? std::min(1.0, 2.0 * v_other / den) : 0.0;
+    if (!(a >= 0)) a = 0.0;
+    // a^2 miss / (nd calibration), taken in this order: the squared bias alone may overflow (a
+    // calibration of 1e-8, a bias of 1e151) where a is ~1e-186 and a^2 underflows, and 0 x Inf
+    // was a NaN variance. a (a miss) <= miss, and a^2 miss <= v_other, so every step is finite.
+    bias_term = a * (a * std::max(miss, 0.0)) / (nd * calibration);
+    return a;
+}
+
 // The estimate of pixel (x, y) of half `own` from the other half. readable(xx, yy): the
 // neighbour is a clean pixel in both halves; readable_other: in the other half. blend = false: the other half's value alone.
 // out: colour channels, then variance channels. Returns the spatial weight a.
@@ -52,7 +78,6 @@ double cross_half_estimate(const half_views<C, V>& own, const half_views<C, V>& 
                            double calibration, bool blend, int x, int y, Readable&& readable,
                            ReadableOther&& readable_other, double* out) {
     const int nc = own.color.channels(), nv = own.variance.channels();
-    const int nd = nc < 3 ? nc : 3;  // colour channels that decide (a 4th is carried along)
     double xo[4], vo[4];
     for (int c = 0; c < nc; ++c) xo[c] = other.color.load(x, y, c);
     for (int c = 0; c < nv; ++c) vo[c] = std::max(other.variance.load(x, y, c), 0.0);
@@ -62,57 +87,53 @@ double cross_half_estimate(const half_views<C, V>& own, const half_views<C, V>& 
     // the spatial estimate comes from: the own half, or the other one where no neighbour of
     // the own half is clean (a failed bucket): then S is the other half's S_B, independent
     // of B(p) all the same.
-    auto sums = [&](auto nc_const, auto nv_const, const half_views<C, V>& mine, auto&& can_read) {
+    // Each value times `scale` (unscaled, or overflow_scale where the plain sums overflowed).
+    auto sums = [&](auto nc_const, auto nv_const, const half_views<C, V>& mine, auto&& can_read, auto scale) {
         constexpr int NC = decltype(nc_const)::value, NV = decltype(nv_const)::value;
         const int w = own.color.width(), h = own.color.height();
         return kernel_sum_1_2<NC, NV>(
             kernel, x, y, w, h, 2 * nc, 2 * nv, can_read,
             [&](int xx, int yy, double* v) {
-                for (int c = 0; c < nc; ++c) v[c] = mine.color.load(xx, yy, c), v[nc + c] = other.color.load(xx, yy, c);
+                for (int c = 0; c < nc; ++c)
+                    v[c] = mine.color.load(xx, yy, c) * scale, v[nc + c] = other.color.load(xx, yy, c) * scale;
             },
             [&](int xx, int yy, double* v) {
                 for (int c = 0; c < nv; ++c)
-                    v[c] = std::max(mine.variance.load(xx, yy, c), 0.0),
-                    v[nv + c] = std::max(other.variance.load(xx, yy, c), 0.0);
+                    v[c] = std::max(mine.variance.load(xx, yy, c), 0.0) * scale,
+                    v[nv + c] = std::max(other.variance.load(xx, yy, c), 0.0) * scale;
             },
             s, vs);
     };
-    auto sums_for = [&](const half_views<C, V>& mine, auto&& can_read) {
+    auto sums_for = [&](const half_views<C, V>& mine, auto&& can_read, auto scale) {
         using I0 = std::integral_constant<int, 0>;
         using I2 = std::integral_constant<int, 2>;
         using I6 = std::integral_constant<int, 6>;
-        return nc == 3 && nv == 3   ? sums(I6{}, I6{}, mine, can_read)
-               : nc == 3 && nv == 1 ? sums(I6{}, I2{}, mine, can_read)
-                                    : sums(I0{}, I0{}, mine, can_read);
+        return nc == 3 && nv == 3   ? sums(I6{}, I6{}, mine, can_read, scale)
+               : nc == 3 && nv == 1 ? sums(I6{}, I2{}, mine, can_read, scale)
+                                    : sums(I0{}, I0{}, mine, can_read, scale);
     };
     if (blend) {
-        double wsum = sums_for(own, readable);
-        if (!(wsum > 0)) wsum = sums_for(other, readable_other);
+        bool from_own = true;
+        double wsum = sums_for(own, readable, unscaled{});
+        if (!(wsum > 0)) from_own = false, wsum = sums_for(other, readable_other, unscaled{});
+        const bool rescaled = wsum > 0 && !(all_finite(s, 2 * nc) && all_finite(vs, 2 * nv));
+        if (rescaled) {  // double values near DBL_MAX
+            std::fill(s, s + 8, 0.0);
+            std::fill(vs, vs + 8, 0.0);
+            if (from_own) (void)sums_for(own, readable, overflow_scale);
+            else (void)sums_for(other, readable_other, overflow_scale);
+        }
         if (wsum > 0) {
-            for (int c = 0; c < 2 * nc; ++c) s[c] /= wsum;
-            for (int c = 0; c < 2 * nv; ++c) vs[c] /= wsum * wsum;
-            double v_other = 0, var_s = 0, miss = 0;  // channel sums, variances of the mean
-            for (int c = 0; c < nd; ++c) {
-                const int j = nv == 1 ? 0 : c;
-                const double d = s[nc + c] - xo[c];
-                v_other += calibration * vo[j];
-                var_s += calibration * vs[j];
-                miss += d * d - calibration * (vo[j] + vs[nv + j]);
-            }
-            const double mse_s = var_s + std::max(miss, 0.0);
-            const double den = mse_s + v_other;
-            a = den > 0 && std::isfinite(den) ? std::min(1.0, 2.0 * v_other / den) : 0.0;
-            if (!(a >= 0)) a = 0.0;
-            // a^2 miss / (nd calibration), per channel in renderer units, taken in this order:
-            // the squared bias alone may overflow (a calibration of 1e-8, a bias of 1e151) where
-            // a is ~1e-186 and a^2 underflows, and 0 x Inf was a NaN variance. a (a miss) <=
-            // miss, and a^2 miss <= v_other, so every step is finite.
-            bias_term = a * (a * std::max(miss, 0.0)) / (nd * calibration);
+            for (int c = 0; c < 2 * nc; ++c) s[c] = rescaled ? from_overflow_scale(s[c] / wsum) : s[c] / wsum;
+            for (int c = 0; c < 2 * nv; ++c)
+                vs[c] = rescaled ? from_overflow_scale(vs[c] / (wsum * wsum)) : vs[c] / (wsum * wsum);
+            a = spatial_weight(s, vs, xo, vo, nc, nv, calibration, bias_term);
         }
     }
-    for (int c = 0; c < nc; ++c) out[c] = a > 0 ? a * s[c] + (1 - a) * xo[c] : xo[c];
+    // (Held within the finite range: the blend of two values near DBL_MAX may round past it.)
+    for (int c = 0; c < nc; ++c) out[c] = a > 0 ? std::clamp(a * s[c] + (1 - a) * xo[c], -DBL_MAX, DBL_MAX) : xo[c];
     for (int c = 0; c < nv; ++c)
-        out[nc + c] = a > 0 ? a * a * vs[c] + bias_term + (1 - a) * (1 - a) * vo[c] : vo[c];
+        out[nc + c] = a > 0 ? std::min(a * a * vs[c] + bias_term + (1 - a) * (1 - a) * vo[c], DBL_MAX) : vo[c];
     return a;
 }
 

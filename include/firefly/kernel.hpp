@@ -9,10 +9,30 @@
 // bit-identical (flipped) output with no sorting.
 #pragma once
 
+#include <algorithm>
+#include <cfloat>
 #include <cmath>
 #include <vector>
 
 namespace firefly::detail {
+
+// Sums of double values near DBL_MAX overflow (inf, or inf - inf = NaN) where the mean they
+// make is finite. Such sums are taken again over the values times overflow_scale (a power of
+// two: exact for all but values far below any that overflow) and the mean scaled back with
+// from_overflow_scale, held within the finite range. Float data never needs it.
+inline constexpr double overflow_scale = 0x1p-128;
+struct unscaled {  // the plain sums' scale: no multiply in their loops
+    friend constexpr double operator*(double v, unscaled) noexcept { return v; }
+};
+inline bool all_finite(const double* v, int n) noexcept {
+    for (int i = 0; i < n; ++i)
+        if (!std::isfinite(v[i])) return false;
+    return true;
+}
+inline double from_overflow_scale(double scaled_mean) noexcept {
+    const double m = std::ldexp(scaled_mean, 128);
+    return m == m ? std::clamp(m, -DBL_MAX, DBL_MAX) : 0.0;  // NaN only from an infinite value
+}
 
 struct kernel_class {
     double weight;

@@ -252,36 +252,29 @@ private:
         return false;
     }
     // Weighted mean of list entry e's readable neighbours into staged; false when none. Where
-    // the plain sums overflow (double sources near DBL_MAX, of either sign: inf, or inf - inf
-    // = NaN) they are taken again over the sources scaled by 2^-128 (exact for all but values
-    // far below any that overflow), the mean scaled back and held within the finite range.
+    // the plain sums overflow (double sources near DBL_MAX) they are taken again at
+    // overflow_scale (kernel.hpp); no rebuild leaves an infinite source.
     template <int NC>
     bool filter(std::size_t e) {
         const std::size_t p = s_.list_[e];
         const int x = static_cast<int>(p % static_cast<std::size_t>(w_)), y = static_cast<int>(p / static_cast<std::size_t>(w_));
         double acc[16] = {};
-        const double wsum = source_sums<NC>(x, y, 1.0, acc);
+        const double wsum = source_sums<NC>(x, y, unscaled{}, acc);
         if (!(wsum > 0)) return false;
         double* out = &s_.staged_[e * stride()];
-        bool finite = true;
-        for (int c = 0; c < nch_; ++c) finite = finite && std::isfinite(acc[c]);
-        if (finite) {
+        if (all_finite(acc, nch_)) {
             for (int c = 0; c < nch_; ++c) out[c] = acc[c] / wsum;
             return true;
         }
         std::fill(acc, acc + 16, 0.0);
-        (void)source_sums<NC>(x, y, 0x1p-128, acc);
-        for (int c = 0; c < nch_; ++c) {
-            const double m = std::ldexp(acc[c] / wsum, 128);
-            out[c] = m == m ? std::clamp(m, -DBL_MAX, DBL_MAX) : 0.0;  // NaN only from an infinite
-                                                                       // source, which no rebuild leaves
-        }
+        (void)source_sums<NC>(x, y, overflow_scale, acc);
+        for (int c = 0; c < nch_; ++c) out[c] = from_overflow_scale(acc[c] / wsum);
         return true;
     }
     // The kernel's weighted sums of the readable sources around (x, y), each value times
-    // `scale` (a power of two), into acc; returns the sum of the weights.
-    template <int NC>
-    double source_sums(int x, int y, double scale, double* acc) {
+    // `scale` (unscaled, or overflow_scale), into acc; returns the sum of the weights.
+    template <int NC, class Scale>
+    double source_sums(int x, int y, Scale scale, double* acc) {
         return kernel_sum<NC>(
             s_.kernel_, x, y, w_, h_, nch_, [this](int xx, int yy) { return readable(xx, yy); },
             [this, scale](int xx, int yy, double* v) {
