@@ -208,3 +208,53 @@ TEST_CASE("a stride of PTRDIFF_MIN is refused, not negated", "[reliability][imag
     CHECK(image_view<float>::create(px, 2, 2, 2, auto_stride, auto_stride, lowest).error().code() ==
           errc::size_overflow);
 }
+
+// Property: double frames full of values from 1e280 to DBL_MAX of both signs (their sums
+// overflow where their means do not) come out finite from both detectors, with and without
+// the energy return, and K buffers whose inputs are all finite are never called non-finite.
+TEST_CASE("finite double frames near DBL_MAX come out finite from both detectors", "[reliability][numerics]") {
+    std::uint64_t state = 12345;
+    auto next = [&state] {  // splitmix64
+        std::uint64_t z = (state += 0x9e3779b97f4a7c15ull);
+        z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+        z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+        return z ^ (z >> 31);
+    };
+    auto uniform = [&next] { return static_cast<double>(next() >> 11) * 0x1.0p-53; };
+    auto value = [&](bool variance) {
+        const double u = uniform(), sign = variance || next() % 2 ? 1.0 : -1.0;
+        switch (next() % 8) {
+        case 0: case 1: case 2: return variance ? u * u : 2 * u;
+        case 3: case 4: return sign * DBL_MAX * (0.5 + 0.5 * u);
+        case 5: case 6: return sign * std::pow(10.0, 280 + 28 * u);
+        default: return variance ? u : 1e6 * u;
+        }
+    };
+    for (int trial = 0; trial < 400; ++trial) {
+        const int w = 1 + static_cast<int>(next() % 10), h = 1 + static_cast<int>(next() % 10);
+        const int k = 2 + static_cast<int>(next() % 4);
+        const bool with_variance = k == 2 || next() % 2;
+        std::vector<std::vector<double>> col(static_cast<std::size_t>(k)), var(static_cast<std::size_t>(k));
+        std::vector<buffer_view<double>> views;
+        for (int b = 0; b < k; ++b) {
+            auto& c = col[static_cast<std::size_t>(b)];
+            auto& v = var[static_cast<std::size_t>(b)];
+            for (int i = 0; i < w * h * 3; ++i) c.push_back(value(false)), v.push_back(value(true));
+            views.push_back({*make_image_view(c.data(), w, h, 3),
+                             with_variance ? *make_image_view(v.data(), w, h, 3) : image_view<double>{}});
+        }
+        cross_buffer_options o;
+        o.return_energy = o.pair.return_energy = next() % 2 == 0;
+        cross_buffer_detector d(o);
+        const cross_buffer_report r = d.process(views);
+        INFO("trial " << trial << ", K " << k << ", " << w << "x" << h << ": " << r.error.message());
+        CHECK(r.nonfinite == 0);
+        CHECK(r.left == 0);
+        bool finite = true;
+        for (int b = 0; b < k; ++b)
+            for (int i = 0; i < w * h * 3; ++i)
+                finite = finite && std::isfinite(col[static_cast<std::size_t>(b)][static_cast<std::size_t>(i)]) &&
+                         std::isfinite(var[static_cast<std::size_t>(b)][static_cast<std::size_t>(i)]);
+        CHECK(finite);
+    }
+}
