@@ -943,7 +943,7 @@ private:
             const int nv = has_var ? b[0].variance.channels() : 0;
             std::array<double, 8> sum{};  // colour channels, then variance channels
             int n = 0;
-            auto add_clean = [&](double scale) {
+            auto add_clean = [&](auto scale) {  // unscaled, or overflow_scale (kernel.hpp)
                 n = 0;
                 for (int j = 0; j < p.usable; ++j) {
                     const int i = p.order[static_cast<std::size_t>(j)];
@@ -954,7 +954,7 @@ private:
                         sum[static_cast<std::size_t>(nc + c)] += std::max(b[i].variance.load(x, y, c), 0.0) * scale;
                 }
             };
-            add_clean(1.0);
+            add_clean(detail::unscaled{});
             std::array<double, 8> mean{};
             const bool rescaled = !detail::all_finite(sum.data(), nc + nv);  // double values near DBL_MAX
             if (rescaled) sum.fill(0.0), add_clean(detail::overflow_scale);
