@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <random>
 #include <thread>
 #include <vector>
 
@@ -159,13 +160,7 @@ TEST_CASE("accumulator: views go straight to the detector; errors as status", "[
 // rounding plus Welford's own error (a few ulps of the sum of squares per sample); the
 // variance is never negative, never NaN, and finite (FLT_MAX at most) for finite samples.
 TEST_CASE("accumulator: random streams agree with a two-pass reference", "[accumulator][property]") {
-    std::uint64_t state = 0x9e3779b97f4a7c15ull;
-    auto next = [&state] {  // splitmix64
-        std::uint64_t z = (state += 0x9e3779b97f4a7c15ull);
-        z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-        z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-        return z ^ (z >> 31);
-    };
+    std::mt19937_64 next(99);
     auto uniform = [&next] { return static_cast<double>(next() >> 11) * 0x1.0p-53; };
     auto draw = [&](float base) -> float {
         switch (next() % 8) {

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <random>
 #include <vector>
 
 #include "catch.hpp"
@@ -213,13 +214,7 @@ TEST_CASE("a stride of PTRDIFF_MIN is refused, not negated", "[reliability][imag
 // overflow where their means do not) come out finite from both detectors, with and without
 // the energy return, and K buffers whose inputs are all finite are never called non-finite.
 TEST_CASE("finite double frames near DBL_MAX come out finite from both detectors", "[reliability][numerics]") {
-    std::uint64_t state = 12345;
-    auto next = [&state] {  // splitmix64
-        std::uint64_t z = (state += 0x9e3779b97f4a7c15ull);
-        z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-        z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-        return z ^ (z >> 31);
-    };
+    std::mt19937_64 next(12345);
     auto uniform = [&next] { return static_cast<double>(next() >> 11) * 0x1.0p-53; };
     auto value = [&](bool variance) {
         const double u = uniform(), sign = variance || next() % 2 ? 1.0 : -1.0;
