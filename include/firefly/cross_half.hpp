@@ -116,14 +116,14 @@ double cross_half_estimate(const half_views<C, V>& own, const half_views<C, V>& 
         bool from_own = true;
         double wsum = sums_for(own, readable, unscaled{});
         if (!(wsum > 0)) from_own = false, wsum = sums_for(other, readable_other, unscaled{});
-        const bool rescaled = wsum > 0 && !(all_finite(s, 2 * nc) && all_finite(vs, 2 * nv));
-        if (rescaled) {  // double values near DBL_MAX
-            std::fill(s, s + 8, 0.0);
-            std::fill(vs, vs + 8, 0.0);
-            if (from_own) (void)sums_for(own, readable, overflow_scale);
-            else (void)sums_for(other, readable_other, overflow_scale);
-        }
         if (wsum > 0) {
+            const bool rescaled = !(all_finite(s, 2 * nc) && all_finite(vs, 2 * nv));
+            if (rescaled) {  // double values near DBL_MAX
+                std::fill(s, s + 8, 0.0);
+                std::fill(vs, vs + 8, 0.0);
+                if (from_own) (void)sums_for(own, readable, overflow_scale);
+                else (void)sums_for(other, readable_other, overflow_scale);
+            }
             for (int c = 0; c < 2 * nc; ++c) s[c] = rescaled ? from_overflow_scale(s[c] / wsum) : s[c] / wsum;
             for (int c = 0; c < 2 * nv; ++c)
                 vs[c] = rescaled ? from_overflow_scale(vs[c] / (wsum * wsum)) : vs[c] / (wsum * wsum);
