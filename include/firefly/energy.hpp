@@ -87,9 +87,20 @@
 #include <limits>
 #include <vector>
 
+#include "fused.hpp"
 #include "image_view.hpp"
 #include "parallel.hpp"
 #include "status.hpp"
+
+// The flip and transpose invariants hold where multiply and add are fused within an expression
+// (fused.hpp). Clang's -ffp-contract=fast fuses across statements too, differently in the
+// two orders' loops (transposed frames then differed in the last bit at -O3): this header asks
+// for contraction within expressions, Clang's default, and gives the includer's setting back at
+// its end. (GCC's fusing across statements keeps the invariants: the energy_fma test.)
+#if defined(__clang__) && __clang_major__ >= 11
+#pragma float_control(push)
+#pragma clang fp contract(on)
+#endif
 
 namespace firefly {
 
@@ -731,18 +742,8 @@ inline cell_lerp cell_lerp_at(const cell_axis& a, int p2) noexcept {
 
 // Bilinear interpolation of four values f00 (x0, y0), f01 (x1, y0), f10, f11 with weights ax,
 // bx along x and ay, by along y, the mean of the two orders (x first, y first): flips and
-// transposes (which swap the weights) give the same bits. weighted_pair: one step, a fa + b fb.
-// Where the target fuses multiply and add (__FP_FAST_FMA: -mfma, aarch64), a compiler may
-// contract a fa + b fb into fma(a, fa, b fb) or fma(b, fb, a fa), rounding one product less,
-// and a flip swaps the pairs: there both fusings are taken explicitly and averaged, which no
-// compiler can regroup. Elsewhere nothing can be contracted.
-inline double weighted_pair(double a, double b, double fa, double fb) noexcept {
-#ifdef __FP_FAST_FMA
-    return 0.5 * (std::fma(a, fa, b * fb) + std::fma(b, fb, a * fa));
-#else
-    return a * fa + b * fb;
-#endif
-}
+// transposes (which swap the weights) give the same bits (weighted_pair: a fa + b fb, fused the
+// same way for either order of the pair).
 inline double weighted_bilinear(double f00, double f01, double f10, double f11, double ax, double bx, double ay,
                                 double by) noexcept {
     const double xy = weighted_pair(ay, by, weighted_pair(ax, bx, f00, f01), weighted_pair(ax, bx, f10, f11));
@@ -1213,3 +1214,7 @@ energy_totals return_energy_to_image(const image_view<C>& color, const std::uint
 }
 
 }  // namespace firefly
+
+#if defined(__clang__) && __clang_major__ >= 11
+#pragma float_control(pop)
+#endif

@@ -34,6 +34,7 @@
 #include <arm_neon.h>
 #endif
 
+#include "fused.hpp"
 #include "image_view.hpp"
 #include "parallel.hpp"
 #include "status.hpp"
@@ -100,7 +101,7 @@ inline double reduce_variance(const V* px, std::ptrdiff_t cstride, int channels,
     }
     if (n == 1) return v[0];
     if (how == variance_reduction::max) return std::max(v[0], std::max(v[1], v[2]));
-    if (how == variance_reduction::luminance && n == 3) return 0.2126 * v[0] + 0.7152 * v[1] + 0.0722 * v[2];
+    if (how == variance_reduction::luminance && n == 3) return luminance(v[0], v[1], v[2]);
     return (v[0] + v[1] + v[2]) / n;
 }
 
@@ -155,7 +156,7 @@ inline R classify_pixel(const R (&c)[3], const R (&v)[3], R a, std::uint8_t& lab
     R var;
     if (NV == 1) var = v0;
     else if (How == variance_reduction::max) var = std::max(v0, std::max(v1, v2));
-    else if (How == variance_reduction::luminance && NV == 3) var = R(0.2126) * v0 + R(0.7152) * v1 + R(0.0722) * v2;
+    else if (How == variance_reduction::luminance && NV == 3) var = luminance(v0, v1, v2);
     else var = (v0 + v1 + v2) / R(NV);
     const bool ignored = black | !covered;
     label = static_cast<std::uint8_t>(finite ? (ignored ? 1 : 0) : 2);
@@ -207,7 +208,7 @@ inline float classify_bits(float cf0, float cf1, float cf2, float vf0, float vf1
     float var;
     if (NV == 1) var = v0;
     else if (How == variance_reduction::max) var = std::max(v0, std::max(v1, v2));
-    else if (How == variance_reduction::luminance && NV == 3) var = 0.2126f * v0 + 0.7152f * v1 + 0.0722f * v2;
+    else if (How == variance_reduction::luminance && NV == 3) var = luminance(v0, v1, v2);
     else var = v0 / float(NV) + v1 / float(NV) + v2 / float(NV);  // no overflow at FLT_MAX
     const std::uint32_t ignored = black | (covered ^ 1u);
     const std::uint32_t nf_mask = 0u - nonfinite, ig_mask = 0u - ignored;

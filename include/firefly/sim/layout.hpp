@@ -200,7 +200,9 @@ private:
         }
     }
 
-    static std::uint64_t stream_of(effect e) noexcept { return detail::layout_stream + e; }
+    static std::uint64_t stream_of(effect e) noexcept {
+        return std::uint64_t{detail::layout_stream} + static_cast<std::uint64_t>(e);
+    }
 
     const scene& sc_;
     int w_, h_;
