@@ -10,6 +10,7 @@
 #include <firefly/sim/scenes.hpp>
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
 #include <cstring>
 #include <random>
@@ -172,6 +173,27 @@ TEST_CASE("energy return: one scratch over frames of other shapes gives a fresh 
             INFO(sh[0] << "x" << sh[1] << ", sigma " << sigma.fine << " / " << sigma.coarse);
             CHECK(std::memcmp(a.data(), b.data(), a.size() * sizeof(double)) == 0);
         }
+}
+
+TEST_CASE("fused sums: a weighted pair gives the same bits with its pairs swapped", "[energy][invariant]") {
+    // built with -mfma -ffp-contract=fast in the energy_fma test (and by other_compiler), where
+    // a plain a fa + b fb may be fused either way; values over 40 decades and both signs
+    std::mt19937_64 rng(7);
+    std::uniform_real_distribution<double> u(-1.0, 1.0), e(-20.0, 20.0);
+    auto draw = [&] { return u(rng) * std::pow(10.0, e(rng)); };
+    std::size_t differ = 0, off = 0;
+    for (int i = 0; i < 100000; ++i) {
+        const double a = std::fabs(u(rng)), b = 1.0 - a, fa = draw(), fb = draw();
+        const double ab = detail::weighted_pair(a, b, fa, fb), ba = detail::weighted_pair(b, a, fb, fa);
+        differ += std::memcmp(&ab, &ba, sizeof ab) != 0;
+        const long double exact = static_cast<long double>(a) * fa + static_cast<long double>(b) * fb;
+        const long double scale = std::fabs(static_cast<long double>(a) * fa) + std::fabs(static_cast<long double>(b) * fb);
+        off += std::fabs(static_cast<long double>(ab) - exact) > 2.5 * DBL_EPSILON * scale;
+    }
+    CHECK(differ == 0);
+    CHECK(off == 0);  // within the plain sum's rounding
+    const float lum = detail::luminance(1.0f, 1.0f, 1.0f);
+    CHECK(std::fabs(lum - 1.0f) <= 2 * FLT_EPSILON);  // the weights sum to 1
 }
 
 TEST_CASE("energy return: flipped and transposed frames give the same bits", "[energy][invariant]") {
