@@ -1,5 +1,6 @@
 # Builds tests/consumer as a user would: against an installed firefly (find_package), through
-# add_subdirectory, or by dropping include/firefly into a code base and compiling by hand.
+# add_subdirectory, or by dropping include/firefly into a code base and compiling by hand; and
+# checks that a translation unit built with -ffast-math is refused (fast_math).
 cmake_minimum_required(VERSION 3.16)
 file(REMOVE_RECURSE "${WORK}")
 file(MAKE_DIRECTORY "${WORK}")
@@ -54,6 +55,17 @@ elseif(MODE STREQUAL "header_drop")
   run(${CXX} -std=c++17 -fno-exceptions -Wall -Wextra -Wpedantic -Werror
       -I "${WORK}/vendor" "${CONSUMER}/main.cpp" -o "${WORK}/consumer" -pthread)
   run("${WORK}/consumer")
+elseif(MODE STREQUAL "fast_math")
+  # A translation unit built with -ffast-math is refused with the way out in the message
+  # (floating_point.hpp), and builds when the user opts in with FIREFLY_ALLOW_FAST_MATH.
+  foreach(flag -ffast-math -ffinite-math-only)
+    execute_process(COMMAND ${CXX} -std=c++17 ${flag} -fsyntax-only -I "${FIREFLY_SOURCE}/include" "${CONSUMER}/main.cpp"
+                    RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+    if(rc EQUAL 0 OR NOT err MATCHES "FIREFLY_ALLOW_FAST_MATH")
+      message(FATAL_ERROR "${flag}: not refused with the way out (${rc})\n${err}")
+    endif()
+    run(${CXX} -std=c++17 ${flag} -DFIREFLY_ALLOW_FAST_MATH -fsyntax-only -I "${FIREFLY_SOURCE}/include" "${CONSUMER}/main.cpp")
+  endforeach()
 else()
   message(FATAL_ERROR "unknown MODE ${MODE}")
 endif()

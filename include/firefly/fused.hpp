@@ -11,6 +11,8 @@
 
 #include <cmath>
 
+#include "floating_point.hpp"
+
 // GCC says the target fuses with __FP_FAST_FMA; Clang does not define it (and contracts within
 // an expression by default), so the target's own macros are read too.
 #if defined(__FP_FAST_FMA) || defined(__FMA__) || defined(__ARM_FEATURE_FMA) || defined(__aarch64__) || \

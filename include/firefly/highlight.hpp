@@ -78,6 +78,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "floating_point.hpp"
+
 namespace firefly {
 
 enum class highlight_rule : std::uint8_t { same_pixel, agree, confident, confident_and_agree };

@@ -12,6 +12,7 @@
 #include <limits>
 #include <type_traits>
 
+#include "floating_point.hpp"
 #include "status.hpp"
 
 namespace firefly {

@@ -14,6 +14,8 @@
 #include <cmath>
 #include <vector>
 
+#include "floating_point.hpp"
+
 namespace firefly::detail {
 
 // Sums of double values near DBL_MAX overflow (inf, or inf - inf = NaN) where the mean they

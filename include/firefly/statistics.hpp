@@ -32,6 +32,8 @@
 #include <emmintrin.h>
 #endif
 
+#include "floating_point.hpp"
+
 namespace firefly {
 
 // Count, mean and sum of squared deviations of a set of values.

@@ -4,6 +4,8 @@
 
 #include <utility>
 
+#include "floating_point.hpp"
+
 namespace firefly {
 
 enum class errc : int {

@@ -19,6 +19,8 @@
 #include <cmath>
 #include <limits>
 
+#include "floating_point.hpp"
+
 namespace firefly {
 
 namespace detail {

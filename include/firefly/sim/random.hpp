@@ -11,6 +11,8 @@
 #include <cstdint>
 #include <limits>
 
+#include "../floating_point.hpp"
+
 namespace firefly::sim::detail {
 
 inline constexpr std::uint64_t golden = 0x9E3779B97F4A7C15ull;
