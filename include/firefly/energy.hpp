@@ -97,7 +97,7 @@
 // two orders' loops (transposed frames then differed in the last bit at -O3): this header asks
 // for contraction within expressions, Clang's default, and gives the includer's setting back at
 // its end. (GCC's fusing across statements keeps the invariants: the energy_fma test.)
-#if defined(__clang__) && __clang_major__ >= 11
+#ifdef FIREFLY_DETAIL_CLANG_FP_PRAGMAS
 #pragma float_control(push)
 #pragma clang fp contract(on)
 #endif
@@ -1215,6 +1215,6 @@ energy_totals return_energy_to_image(const image_view<C>& color, const std::uint
 
 }  // namespace firefly
 
-#if defined(__clang__) && __clang_major__ >= 11
+#ifdef FIREFLY_DETAIL_CLANG_FP_PRAGMAS
 #pragma float_control(pop)
 #endif

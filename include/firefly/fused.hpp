@@ -20,6 +20,13 @@
 #define FIREFLY_DETAIL_TARGET_FMA 1
 #endif
 
+// Clang's pragmas for the floating-point state of a region (float_control push and pop, fp
+// contract): LLVM 11 and later, Apple's Clang 13 and later.
+#if defined(__clang__) && ((defined(__apple_build_version__) && __clang_major__ >= 13) || \
+                           (!defined(__apple_build_version__) && __clang_major__ >= 11))
+#define FIREFLY_DETAIL_CLANG_FP_PRAGMAS 1
+#endif
+
 namespace firefly::detail {
 
 // a fa + b fb, the same bits with the pairs swapped (a flip swaps them): both fusings taken
