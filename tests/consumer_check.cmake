@@ -52,9 +52,13 @@ elseif(MODE STREQUAL "add_subdirectory")
   endif()
 elseif(MODE STREQUAL "header_drop")
   file(COPY "${FIREFLY_SOURCE}/include/firefly" DESTINATION "${WORK}/vendor")
-  run(${CXX} -std=c++17 -fno-exceptions -Wall -Wextra -Wpedantic -Werror
+  run(${CXX} -std=c++17 -fno-exceptions -fno-rtti -Wall -Wextra -Wpedantic -Werror
       -I "${WORK}/vendor" "${CONSUMER}/main.cpp" -o "${WORK}/consumer" -pthread)
   run("${WORK}/consumer")
+  foreach(std c++20 c++2b)  # later standards: the same headers, the same warnings
+    run(${CXX} -std=${std} -fsyntax-only -fno-exceptions -fno-rtti -Wall -Wextra -Wpedantic -Werror
+        -I "${WORK}/vendor" "${CONSUMER}/main.cpp")
+  endforeach()
 elseif(MODE STREQUAL "fast_math")
   # A translation unit built with -ffast-math is refused with the way out in the message
   # (floating_point.hpp), and builds when the user opts in with FIREFLY_ALLOW_FAST_MATH.
