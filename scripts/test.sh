@@ -6,7 +6,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-packages=(cmake g++ clang pkg-config catch2 libglm-dev libbenchmark-dev libopenexr-dev libdeflate-dev libpng-dev nlohmann-json3-dev libcli11-dev
+packages=(cmake g++ clang g++-aarch64-linux-gnu qemu-user pkg-config catch2 libglm-dev libbenchmark-dev libopenexr-dev libdeflate-dev libpng-dev nlohmann-json3-dev libcli11-dev
           pybind11-dev python3-dev python3-numpy python3-pytest python3-openimageio libclang-rt-14-dev)
 missing=()
 for p in "${packages[@]}"; do
