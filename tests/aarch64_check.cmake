@@ -7,12 +7,7 @@ file(REMOVE_RECURSE "${WORK}")
 file(MAKE_DIRECTORY "${WORK}/include/catch2")
 file(COPY "${CATCH2}" DESTINATION "${WORK}/include/catch2")  # the header alone, not the host's /usr/include
 
-function(run)
-  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
-  if(NOT rc EQUAL 0)
-    message(FATAL_ERROR "failed (${rc}): ${ARGN}\n${out}\n${err}")
-  endif()
-endfunction()
+include("${CMAKE_CURRENT_LIST_DIR}/check_run.cmake")
 
 run(${CXX} -std=gnu++17 -O2 -Wall -Wextra -I "${INCLUDE}" -I "${WORK}/include"
     "-DFIREFLY_TEST_DATA=\"${DATA}\"" "-DFIREFLY_SHARED_DATA=\"${SHARED_DATA}\""

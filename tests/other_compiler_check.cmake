@@ -5,12 +5,7 @@
 cmake_minimum_required(VERSION 3.16)
 file(REMOVE_RECURSE "${WORK}")
 
-function(run)
-  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
-  if(NOT rc EQUAL 0)
-    message(FATAL_ERROR "failed (${rc}): ${ARGN}\n${out}\n${err}")
-  endif()
-endfunction()
+include("${CMAKE_CURRENT_LIST_DIR}/check_run.cmake")
 
 run(${CMAKE_COMMAND} -S "${FIREFLY_SOURCE}" -B "${WORK}" -G "${GENERATOR}" -DCMAKE_CXX_COMPILER=${OTHER_CXX}
     -DCMAKE_BUILD_TYPE=Release -DFIREFLY_BUILD_TESTS=ON -DFIREFLY_BUILD_BENCHMARKS=OFF

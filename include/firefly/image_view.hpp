@@ -12,7 +12,6 @@
 #include <limits>
 #include <type_traits>
 
-#include "floating_point.hpp"
 #include "status.hpp"
 
 namespace firefly {
