@@ -214,7 +214,8 @@ inline void add_io_options(CLI::App& app, options& c, raw_args& r) {
                    "dropped (0 or 1) for two buffers; firefly, nonfinite, dropped for 3 or more")->type_name("PREFIX")
         ->group("outputs");
     app.add_option("--report", c.report,
-                   "JSON report: options, per-frame counts (buffers, pixels, tested, fireflies, nonfinite, dropped, left, "
+                   "JSON report: options, per-frame counts (buffers, pixels, tested, fireflies, nonfinite, dropped, "
+                   "implausible, left, "
                    "per_buffer; two halves also per half), timings and errors")->type_name("FILE")->group("outputs");
     app.add_option("--preview", c.preview,
                    "PNG previews PREFIX_before.png (mean of the inputs), PREFIX_after.png (the output), sRGB")->type_name("PREFIX")->group("outputs");
@@ -239,6 +240,10 @@ inline void add_detector_options(CLI::App& app, options& c) {
     app.add_flag_callback("--keep-black", [&c] { c.o.find_dropped = c.x.find_dropped = false; },
                           "leave pixels black in one buffer as they are, even where the others show they "
                           "cannot be black by chance (a bucket or render written black; firefly/dropped.hpp)")
+        ->group("detector (every mode)");
+    app.add_flag_callback("--keep-implausible", [&c] { c.o.find_implausible = c.x.find_implausible = false; },
+                          "leave finite values as they are, even where the other buffers show no estimate can "
+                          "hold them (a bucket of 1e30 with a sane variance; firefly/implausible.hpp)")
         ->group("detector (every mode)");
     app.add_option_function<double>("--energy-sigma", [&c](double v) { c.o.energy_sigma = c.x.energy_sigma = v; },
                                     "width in pixels of the energy return's Gaussian")

@@ -382,7 +382,7 @@ std::string write_png_to(firefly_tools::output_set& set, const std::string& path
 json half_json(const half_report& h) {
     return json{{"pixels", h.pixels},       {"valid", h.valid},
                 {"ignored", h.ignored},     {"nonfinite", h.nonfinite},
-                {"dropped", h.dropped},
+                {"dropped", h.dropped},     {"implausible", h.implausible},
                 {"negative_variance", h.negative_variance},
                 {"median_sd", h.median},    {"mad_sd", h.mad},
                 {"bound", h.bound},         {"outliers", h.outliers},
@@ -400,6 +400,7 @@ void put_counts(json& rec, const cross_buffer_report& r) {
     rec["fireflies"] = r.fireflies;
     rec["nonfinite"] = r.nonfinite;
     rec["dropped"] = r.dropped;
+    rec["implausible"] = r.implausible;
     rec["left"] = r.left;
     rec["per_buffer"] = r.per_buffer;
     rec["energy_removed"] = r.energy_removed;
@@ -416,8 +417,9 @@ cross_buffer_report pair_counts(const frame_report& r) {
         c.fireflies += h.fireflies;
         c.nonfinite += h.nonfinite;
         c.dropped += h.dropped;
+        c.implausible += h.implausible;
         c.left += h.unreachable;
-        c.per_buffer.push_back(h.fireflies + h.nonfinite + h.dropped);
+        c.per_buffer.push_back(h.fireflies + h.nonfinite + h.dropped + h.implausible);
         c.energy_removed += h.energy_removed;
         c.energy_returned += h.energy_returned;
     }
@@ -457,7 +459,7 @@ std::string clean_pair(detector& d, std::vector<buffer_data>& h, mask_list& mask
     rec["b"] = half_json(r.half[1]);
     put_counts(rec, pair_counts(r));
     char text[160];
-    std::snprintf(text, sizeof text, "fireflies %zu + %zu, highlights kept %zu, non-finite repaired %zu + %zu",
+    std::snprintf(text, sizeof text, "fireflies %zu + %zu, highlights kept %zu, repaired (non-finite, dropped, implausible) %zu + %zu",
                   r.half[0].fireflies, r.half[1].fireflies, r.half[0].highlights, r.half[0].repaired, r.half[1].repaired);
     line = text;
     return {};
@@ -474,13 +476,14 @@ std::string clean_cross(const options& c, cross_buffer_detector& xd, std::vector
     }
     const cross_buffer_report r = xd.process(views, mv);
     if (r.left > 0)
-        return std::to_string(r.left) + " pixels have NaN/Inf or a dropped (black) bucket in more than half of the " +
+        return std::to_string(r.left) + " pixels have NaN/Inf, a dropped (black) bucket or implausible values in more than half of the " +
                inputs_noun(c) + ": nothing to rebuild them from";
     if (!r.ok()) return std::string("cannot clean the frame: ") + r.error.message();
     put_counts(rec, r);
     line = "fireflies " + std::to_string(r.fireflies) + " (per " + (c.mode == input_mode::renders ? "render" : "buffer") + ":";
     for (std::size_t n : r.per_buffer) line += " " + std::to_string(n);
     line += "), non-finite repaired " + std::to_string(r.nonfinite);
+    if (r.implausible > 0) line += ", implausible repaired " + std::to_string(r.implausible);
     return {};
 }
 
@@ -621,6 +624,7 @@ json options_json(const options& c) {
         j["refine_noise"] = c.x.refine_noise;
         j["return_energy"] = c.x.return_energy;
         j["find_dropped"] = c.x.find_dropped;
+        j["find_implausible"] = c.x.find_implausible;
         j["energy_sigma"] = c.x.energy_sigma;
         j["energy_coarse_sigma"] = c.x.energy_coarse_sigma;
         j["threads"] = c.threads;
@@ -642,6 +646,7 @@ json options_json(const options& c) {
                   {"iterations", o.reconstruction.max_iterations},
                   {"return_energy", o.return_energy},
                   {"find_dropped", o.find_dropped},
+                  {"find_implausible", o.find_implausible},
                   {"energy_sigma", o.energy_sigma},
                   {"energy_coarse_sigma", o.energy_coarse_sigma},
                   {"threads", c.threads}});

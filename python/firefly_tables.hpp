@@ -103,6 +103,7 @@ constexpr void for_each_option(F&& f) {
     f("blend_spatial", [](O& o) -> auto& { return o.blend_spatial; });
     f("reconstruct", [](O& o) -> auto& { return o.reconstruct; });
     f("find_dropped", [](O& o) -> auto& { return o.find_dropped; });
+    f("find_implausible", [](O& o) -> auto& { return o.find_implausible; });
     f("return_energy", [](O& o) -> auto& { return o.return_energy; });
     f("energy_sigma", [](O& o) -> auto& { return o.energy_sigma; });
     f("energy_coarse_sigma", [](O& o) -> auto& { return o.energy_coarse_sigma; });
@@ -124,6 +125,7 @@ constexpr void for_each_half_field(F&& f) {
     f("ignored", &H::ignored);
     f("nonfinite", &H::nonfinite);
     f("dropped", &H::dropped);
+    f("implausible", &H::implausible);
     f("negative_variance", &H::negative_variance);
     f("median", &H::median);
     f("mad", &H::mad);
@@ -169,6 +171,7 @@ constexpr void for_each_buffer_option(F&& f) {
     f("use_variance", [](O& o) -> auto& { return o.use_variance; });
     f("reconstruct", [](O& o) -> auto& { return o.reconstruct; });
     f("find_dropped", [](O& o) -> auto& { return o.find_dropped; });
+    f("find_implausible", [](O& o) -> auto& { return o.find_implausible; });
     f("refine_noise", [](O& o) -> auto& { return o.refine_noise; });
     f("radius", [](O& o) -> auto& { return o.radius; });
     f("return_energy", [](O& o) -> auto& { return o.return_energy; });
@@ -190,6 +193,7 @@ constexpr void for_each_buffer_field(F&& f) {
     f("fireflies", &R::fireflies);
     f("nonfinite", &R::nonfinite);
     f("dropped", &R::dropped);
+    f("implausible", &R::implausible);
     f("left", &R::left);
     f("energy_removed", &R::energy_removed);
     f("energy_returned", &R::energy_returned);

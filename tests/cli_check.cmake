@@ -612,6 +612,19 @@ endfunction()
 check_dropped(dropped_found square ${WORK}/black_a.exr ${B} -o ${WORK}/black.exr --masks ${WORK}/blackm)
 check_dropped(dropped_kept none ${WORK}/black_a.exr ${B} -o ${WORK}/black_kept.exr --keep-black)
 check_dropped(dropped_intact none ${A} ${B} -o ${WORK}/black_intact.exr)
+# a bucket of 1e30 in half A's colour, its variance sane: found implausible and rebuilt from
+# half B (the report's implausible); left with --keep-implausible
+make(tile ${A} ${WORK}/garbage_a.exr 30 20 24 1e30)
+function(check_implausible name want)
+  expect_ok(${name} ${WORK}/garbage_a.exr ${B} -o ${WORK}/${name}.exr --report ${WORK}/${name}.json -q ${ARGN})
+  json_get(got ${WORK}/${name}.json frames 0 a implausible)
+  json_get(other ${WORK}/${name}.json frames 0 b implausible)
+  if(NOT other EQUAL 0 OR (want STREQUAL "none" AND NOT got EQUAL 0) OR (want STREQUAL "square" AND NOT got EQUAL 576))
+    message(SEND_ERROR "${name}: ${got} + ${other} pixels found implausible (want ${want})")
+  endif()
+endfunction()
+check_implausible(implausible_found square)
+check_implausible(implausible_kept none --keep-implausible)
 # the same bucket black in two of four renders at once (renders: the halves' colours, A B A B;
 # B's copies black): every one of its 2 x 576 pixel-renders found, none in the intact set
 make(black ${B} ${WORK}/black_b.exr 30 20 24)
@@ -628,7 +641,7 @@ endfunction()
 check_dropped_renders(dropped_two_renders 1152 ${A} ${WORK}/black_b.exr ${WORK}/a2.exr ${WORK}/black_b2.exr)
 check_dropped_renders(dropped_two_renders_intact 0 ${A} ${B} ${WORK}/a2.exr ${WORK}/b2.exr)
 # black in two of three renders: more than half unusable there, the frame refused, saying so
-expect_fail(dropped_most_renders "dropped (black) bucket in more than half of the renders" ${O}
+expect_fail(dropped_most_renders "dropped (black) bucket or implausible values in more than half of the renders" ${O}
             --renders ${A} ${WORK}/black_b.exr ${WORK}/black_b2.exr -o ${O})
 expect_fail(energy_coarse_range "--energy-coarse-sigma" ${WORK}/noen3.exr ${A} ${B} -o ${WORK}/noen3.exr --energy-coarse-sigma 1)
 check_energy_options(halves_energy_default ON ${A} ${B} -o ${WORK}/en2.exr)

@@ -7,6 +7,8 @@
 //   make_nan alpha IN.exr OUT.exr         IN's channels and windows, and alpha A = 1
 //   make_nan black IN.exr OUT.exr X Y S   IN with every channel of the S x S square at (X, Y)
 //                                         (data-window coordinates) set to 0: a bucket written black
+//   make_nan tile IN.exr OUT.exr X Y S V  IN with the colour channels (R, G, B) of that square set
+//                                         to V, the variance kept: a bucket of garbage
 //   make_nan bigwindow IN.exr OUT.exr     IN's bytes with the header's data window made
 //                                         65536 x 65536 (a small file claiming 4 G pixels)
 //   make_nan info FILE.exr                prints "data X0 Y0 X1 Y1 display X0 Y0 X1 Y1
@@ -71,8 +73,9 @@ int shift(int argc, char** argv) {
     return e.empty() ? 0 : 1;
 }
 
-int black(int argc, char** argv) {
-    if (argc != 7) return 2;
+// IN with the S x S square at (X, Y) (data-window coordinates) set to `value` in every channel,
+// or in the colour channels (R, G, B) alone.
+int square(char** argv, float value, bool colour_only) {
     firefly_tools::image img;
     std::string e = firefly_tools::read_exr(argv[2], channel_names(argv[2]), img);
     if (!e.empty()) {
@@ -84,11 +87,17 @@ int black(int argc, char** argv) {
     for (int y = std::max(0, y0); y < std::min(img.height, y0 + side); ++y)
         for (int x = std::max(0, x0); x < std::min(img.width, x0 + side); ++x)
             for (std::size_t c = 0; c < n; ++c)
-                img.pixels[(static_cast<std::size_t>(y) * static_cast<std::size_t>(img.width) + static_cast<std::size_t>(x)) * n + c] = 0.0f;
+                if (!colour_only || img.channels[c] == "R" || img.channels[c] == "G" || img.channels[c] == "B")
+                    img.pixels[(static_cast<std::size_t>(y) * static_cast<std::size_t>(img.width) + static_cast<std::size_t>(x)) * n + c] = value;
     e = firefly_tools::write_exr(argv[3], img);
     if (!e.empty()) std::fprintf(stderr, "%s\n", e.c_str());
     return e.empty() ? 0 : 1;
 }
+
+int black(int argc, char** argv) { return argc == 7 ? square(argv, 0.0f, false) : 2; }
+
+// A bucket of garbage with a sane variance pass.
+int tile(int argc, char** argv) { return argc == 8 ? square(argv, std::strtof(argv[7], nullptr), true) : 2; }
 
 int bigwindow(int argc, char** argv) {
     if (argc != 4) return 2;
@@ -141,6 +150,7 @@ int main(int argc, char** argv) {
         if (argc >= 2 && std::strcmp(argv[1], "info") == 0) return info(argc, argv);
         if (argc >= 2 && std::strcmp(argv[1], "bigwindow") == 0) return bigwindow(argc, argv);
         if (argc >= 2 && std::strcmp(argv[1], "black") == 0) return black(argc, argv);
+        if (argc >= 2 && std::strcmp(argv[1], "tile") == 0) return tile(argc, argv);
     } catch (const std::exception& e) {
         std::fprintf(stderr, "%s\n", e.what());
         return 1;

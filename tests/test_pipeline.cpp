@@ -522,8 +522,8 @@ TEST_CASE("one thread and two threads give bit-identical outputs", "[pipeline][i
                         for (std::size_t i = n; i-- > 0;) t(i);  // reverse order on purpose
                     }));
     (void)hooked.process(c.h[0], c.h[1]);
-    CHECK(calls == 20);  // candidates, the lone blacks of the dropped test (the frame has
-                         // black pixels), the local test (levels, bands of rows), what to rebuild,
+    CHECK(calls == 21);  // the implausible values' row bands, candidates, the lone blacks of
+                         // the dropped test (the frame has black pixels), the local test (levels, bands of rows), what to rebuild,
                          // the other half's estimates, the colour before the rebuild, the
                          // writes; per half, the energy return's median, node rows (y first:
                          // the frame is wider than high), the coarse scale's cell sums and its
@@ -649,11 +649,19 @@ TEST_CASE("constant, 1x1, all-black and all-NaN frames", "[pipeline][hard]") {
     spike(f, 0, 30, 30, FLT_MAX);
     for (const std::size_t i : {std::size_t{4 * 50 + 3}, std::size_t{30 * 50 + 30}})
         for (int c = 0; c < 3; ++c) f.variance[0][i * 3 + c] = FLT_MAX;  // finite, huge
-    halves hv(f);
-    r = d.process(hv.h[0], hv.h[1]);
-    CHECK(r.half[0].fireflies >= 2);
-    for (float x : hv.f.color[0]) CHECK(x < 1.0f);
-    for (float x : hv.f.variance[0]) CHECK(std::isfinite(x));
+    // Their variance puts them ~1e10 standard deviations from the other half: implausible
+    // values (implausible.hpp), rebuilt as non-finite ones; off, fireflies, the numerics alike.
+    for (const bool implausible : {true, false}) {
+        halves hv(f);
+        detector_options o;
+        o.find_implausible = implausible;
+        detector di(o);
+        r = di.process(hv.h[0], hv.h[1]);
+        INFO("find_implausible " << implausible);
+        CHECK((implausible ? r.half[0].implausible : r.half[0].fireflies) >= 2);
+        for (float x : hv.f.color[0]) CHECK(x < 1.0f);
+        for (float x : hv.f.variance[0]) CHECK(std::isfinite(x));
+    }
 }
 
 TEST_CASE("double images and strided (RGBA, padded) views", "[pipeline]") {

@@ -87,11 +87,14 @@
 //       several: a tile that failed in two renders) where the others show it cannot be by
 //       chance (dropped.hpp, find_dropped): then they are left out of the test and rebuilt like
 //       non-finite ones (mask_bits::dropped, report.dropped).
+//   (beyond the paper)                                 -> a buffer's finite value that the others
+//       show no estimate holds (a tile of 1e30, implausible.hpp, find_implausible): left out
+//       of the test and rebuilt like a non-finite one (mask_bits::nonfinite, report.implausible).
 //   "bad in both halves: spatial reconstruction"       -> a pixel with more than floor(K / 2)
 //       non-finite buffers is left as it is and counted (report.left, error no_valid_pixels);
 //       its non-finite buffers' masks say nonfinite | left (found, not repaired), the others 0.
-//       Buffers found dropped count as non-finite: the few left could not be told from their
-//       own fireflies (masks: dropped | left).
+//       Buffers found dropped or implausible count as non-finite: the few left could not be
+//       told from their own fireflies (masks: dropped | left, nonfinite | left).
 //   K = 2 is the paper's method: the two buffers go to firefly::detector unchanged (variance
 //       required), with its global ESD, highlight check and spatial reconstruction.
 // Variance: that of each buffer's mean (accumulator.hpp gives it). Required for K = 2;
@@ -118,6 +121,7 @@
 #include "energy.hpp"
 #include "fdr.hpp"
 #include "image_view.hpp"
+#include "implausible.hpp"
 #include "parallel.hpp"
 #include "pipeline.hpp"
 #include "status.hpp"
@@ -148,6 +152,8 @@ struct cross_buffer_options {
     bool find_dropped = true;    // a buffer black where the others show it cannot be by chance
                                  // (a failed bucket or render written black, dropped.hpp) is
                                  // left out of the test and rebuilt as a non-finite one
+    bool find_implausible = true;  // a buffer's finite value that the others show no estimate
+                                   // holds (a tile of 1e30, implausible.hpp): the same
     bool refine_noise = true;    // neighbours flagged at the cap pool their noise without their flagged buffers
     int radius = 1;              // the noise is pooled over (2 radius + 1)^2 pixels (0 to 8)
     bool return_energy = true;   // K >= 3, 3 or 4 channels: the removed fireflies' energy is
@@ -181,10 +187,12 @@ struct [[nodiscard]] cross_buffer_report {
     std::size_t nonfinite = 0;   // pixel-buffers with NaN/Inf, rebuilt from the others
     std::size_t dropped = 0;     // pixel-buffers black where the others show they cannot be
                                  // (find_dropped), rebuilt from the others
+    std::size_t implausible = 0; // pixel-buffers whose finite value the others show no
+                                 // estimate holds (find_implausible), rebuilt from the others
     std::size_t left = 0;        // pixels with more than K / 2 non-finite buffers, unchanged
                                  // (K = 2: those no usable value reached, the pair detector's
                                  // unreachable; its counts above are what it found)
-    std::vector<std::size_t> per_buffer;  // fireflies, non-finite and dropped, per buffer
+    std::vector<std::size_t> per_buffer;  // fireflies, non-finite, dropped and implausible, per buffer
     double energy_removed = 0;   // sum over pixels of the mean colour the fireflies took from
     double energy_returned = 0;  // the frame's mean image, and of what energy.hpp gave back
     frame_report pair{};         // K = 2: firefly::detector's report
@@ -201,6 +209,7 @@ struct pixel_buffers {
     std::array<bool, max_buffers> finite{}, flagged{};
     std::array<int, max_buffers> order{};  // usable buffers, highest y first
     int usable = 0;
+    std::uint64_t implausible = 0;  // bit i: buffer i's value implausible (implausible.hpp)
     // y of the j-th highest usable buffer
     double ranked_y(int j) const noexcept { return y[static_cast<std::size_t>(order[static_cast<std::size_t>(j)])]; }
 };
@@ -503,6 +512,7 @@ private:
         level_.resize(rep.pixels);
         if (returns_energy(b, k, clean)) excess_.assign(rep.pixels * 3, 0.0), untested_.assign(rep.pixels, 0);
         else excess_.clear(), untested_.clear();
+        implausible_bound_ = detail::implausible_bound(b[0].color.pixel_count() * static_cast<std::size_t>(k), options_.alpha);
         find_dropped_buffers(b, k, has_var);
         exec_.run(static_cast<std::size_t>(h), [&](std::size_t y) {
             noise_row(b, k, has_var, with_var, static_cast<int>(y));
@@ -530,6 +540,7 @@ private:
             rep.fireflies += c.fireflies;
             rep.nonfinite += c.nonfinite;
             rep.dropped += c.dropped;
+            rep.implausible += c.implausible;
             rep.left += c.left;
             for (int i = 0; i < k; ++i) rep.per_buffer[static_cast<std::size_t>(i)] += c.per_buffer[static_cast<std::size_t>(i)];
         }
@@ -558,7 +569,8 @@ private:
             rep.fireflies += hr.fireflies;
             rep.nonfinite += hr.nonfinite;
             rep.dropped += hr.dropped;
-            rep.per_buffer[static_cast<std::size_t>(i)] = hr.fireflies + hr.nonfinite + hr.dropped;
+            rep.implausible += hr.implausible;
+            rep.per_buffer[static_cast<std::size_t>(i)] = hr.fireflies + hr.nonfinite + hr.dropped + hr.implausible;
             rep.left = std::max(rep.left, hr.unreachable);  // pixels: the larger half's count
         }
         rep.tested = rep.pair.half[0].valid;
@@ -575,7 +587,7 @@ private:
     };
     struct row_counts {
         explicit row_counts(int k) : per_buffer(static_cast<std::size_t>(k), 0) {}
-        std::size_t tested = 0, fireflies = 0, nonfinite = 0, dropped = 0, left = 0;
+        std::size_t tested = 0, fireflies = 0, nonfinite = 0, dropped = 0, implausible = 0, left = 0;
         std::vector<std::size_t> per_buffer;
         std::vector<candidate> found;
     };
@@ -667,6 +679,10 @@ private:
         const std::uint64_t d = dropped_buffers(x, y, b[0].color.width());
         for (int i = 0; i < k; ++i)
             if ((d >> i) & 1u) p.finite[static_cast<std::size_t>(i)] = false, p.flagged[static_cast<std::size_t>(i)] = true;
+        p.implausible = options_.find_implausible
+                            ? detail::implausible_buffers(p.level.data(), p.rel_var.data(), p.finite.data(), k, implausible_bound_) : 0;
+        for (int i = 0; i < k; ++i)
+            if ((p.implausible >> i) & 1u) p.finite[static_cast<std::size_t>(i)] = false, p.flagged[static_cast<std::size_t>(i)] = true;
         sort_buffers(b, x, y, p);
     }
 
@@ -829,7 +845,7 @@ private:
             }
             gather(b, k, x, y, has_var, p);
             const int bad = k - p.usable;
-            // left as it is where more than half are non-finite or dropped (its masks say so): the
+            // left as it is where more than half are non-finite, dropped or implausible (its masks say so): the
             // few left cannot be told from their own fireflies (a tile black in two of three
             // Cycles seed renders, rebuilt from the third: relMSE in the tile 2.2, 0.043 intact)
             if (bad > k / 2) {
@@ -900,9 +916,11 @@ private:
             const pooled pn = kept ? pooled_noise(x, y, w, b[0].color.height(), k, with_var, own_rest(p, with_var)) : pooled{};
             const int flags = kept ? detail::judge_pixel(p, pn.noise, with_var, frame_.at(pn.n)) : 0;
             const int dropped = detail::blacks_in(dropped_buffers(x, y, w));
+            const int implausible = detail::blacks_in(p.implausible);
             rc.fireflies += static_cast<std::size_t>(flags);
-            rc.nonfinite += static_cast<std::size_t>(bad - dropped);
+            rc.nonfinite += static_cast<std::size_t>(bad - dropped - implausible);
             rc.dropped += static_cast<std::size_t>(dropped);
+            rc.implausible += static_cast<std::size_t>(implausible);
             for (int i = 0; i < k; ++i) rc.per_buffer[static_cast<std::size_t>(i)] += p.flagged[static_cast<std::size_t>(i)];
             write_masks(masks, p, x, y);
             if (!untested_.empty() && p.usable < 3) untested_[index(x, y, w)] = 1;
@@ -910,7 +928,7 @@ private:
         }
     }
 
-    // A pixel left as it is (more than K / 2 non-finite or dropped buffers): nonfinite | left,
+    // A pixel left as it is (more than K / 2 non-finite, dropped or implausible buffers): nonfinite | left,
     // or dropped | left, on those.
     void write_left_masks(const image_view<std::uint8_t>* masks, const detail::pixel_buffers& p, int x, int y) const {
         if (!masks) return;
@@ -1049,6 +1067,7 @@ private:
     detail::threshold_table frame_{};       // at the frame's level (fdr.hpp)
     double frame_log_p_ = 0;                 // log of the largest p-value kept
     double frame_q_ = 0;                     // the frame's level (0: nothing kept)
+    double implausible_bound_ = HUGE_VAL;    // find_implausible's bound for this frame
     std::vector<double> log_p_;              // the candidates' p-values (log), for the level
     std::vector<double> noise_;  // per pixel: its own relative variance of y (NaN: unknown)
     std::vector<float> level_;   // per pixel: lower_level, its buffers' lower half (NaN: none usable)

@@ -17,6 +17,7 @@
 #include "reconstruct.hpp"
 #include "cross_half.hpp"
 #include "dropped.hpp"
+#include "implausible.hpp"
 #include "parallel.hpp"
 #include "pipeline.hpp"
 #include "buffers.hpp"

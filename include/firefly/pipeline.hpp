@@ -40,6 +40,7 @@
 #include "fdr.hpp"
 #include "highlight.hpp"
 #include "image_view.hpp"
+#include "implausible.hpp"
 #include "local_test.hpp"
 #include "parallel.hpp"
 #include "reconstruct.hpp"
@@ -88,6 +89,9 @@ struct detector_options {
     bool find_dropped = true;           // pixels black in one half where the other half shows
                                         // they cannot be (a failed bucket written black,
                                         // dropped.hpp) are rebuilt as non-finite ones are
+    bool find_implausible = true;       // values the other half shows no Monte Carlo estimate
+                                        // holds (a bucket of 1e30 with a sane variance,
+                                        // implausible.hpp) are rebuilt as non-finite ones are
     bool return_energy = true;          // give back the rebuilt fireflies' energy where many
                                         // agree on it (energy.hpp; adds light to pixels near
                                         // dense fireflies, never lowers any; false: the
@@ -123,7 +127,8 @@ inline status check_options(const detector_options& o) noexcept {
 namespace mask_bits {
 inline constexpr std::uint8_t firefly = 1;    // outlier rebuilt (unless left)
 inline constexpr std::uint8_t highlight = 2;  // outlier in both halves, kept
-inline constexpr std::uint8_t nonfinite = 4;  // NaN/Inf repaired (unless left)
+inline constexpr std::uint8_t nonfinite = 4;  // NaN/Inf repaired (unless left); also an
+                                              // implausible value (implausible.hpp)
 inline constexpr std::uint8_t consistent = 8; // outlier in one half, but within the noise of
                                               // the other half: kept (min_excess_z); or in
                                               // both, within its neighbourhood's noise
@@ -148,6 +153,8 @@ struct half_report {
     std::size_t nonfinite = 0;          // NaN/Inf in colour, variance or alpha
     std::size_t dropped = 0;            // black where the other half shows it cannot be by
                                         // chance (find_dropped; not counted in ignored)
+    std::size_t implausible = 0;        // finite, but beyond what the other half allows any
+                                        // estimate (find_implausible; not counted in valid)
     std::size_t negative_variance = 0;  // pixels with a negative variance (taken as 0)
     double median = 0.0;                // of the standard deviations
     double mad = 0.0;
@@ -160,7 +167,7 @@ struct half_report {
                                         // within their neighbourhood's noise)
     std::size_t frame_kept = 0;         // one-half outliers the frame's decision kept (fdr.hpp)
     std::size_t fireflies = 0;          // outliers to rebuild (rebuilt unless reconstruct = false)
-    std::size_t repaired = 0;           // non-finite and dropped pixels rebuilt
+    std::size_t repaired = 0;           // non-finite, dropped and implausible pixels rebuilt
     std::size_t from_other_half = 0;    // of the rebuilt pixels, those taken from the other half
     std::size_t unreachable = 0;        // pixels to rebuild that no usable source could reach
     int phase1_rounds = 0;
@@ -231,12 +238,14 @@ public:
                         frame_log_p_.capacity() * sizeof(double) + spots_.capacity() * sizeof(strict_pair) +
                         dropped_scratch_.bytes() + dropped_found_.capacity() * sizeof(dropped_pixel) +
                         risen_.capacity() * sizeof(std::pair<std::uint32_t, double>);
+        for (const auto& f : implausible_found_) n += f.capacity() * sizeof(std::uint64_t);
         for (const auto& h : halves_)
             n += h.sd.capacity() * sizeof(float) + h.label.capacity() +
                  h.hist.bytes() + h.select_f.capacity() * sizeof(float) +
                  h.select.capacity() * sizeof(double) + h.order.capacity() * sizeof(std::uint32_t) +
                  h.removed.capacity() * sizeof(double) + (h.keys.capacity() + h.keys_tmp.capacity()) * sizeof(std::uint64_t) +
-                 (h.fix.capacity() + h.cross.capacity() + h.left.capacity() + h.dropped.capacity()) * sizeof(std::uint32_t) +
+                 (h.fix.capacity() + h.cross.capacity() + h.left.capacity() + h.dropped.capacity() +
+                  h.implausible.capacity()) * sizeof(std::uint32_t) +
                  h.cross_values.capacity() * sizeof(double) + h.decision.capacity() +
                  h.band_counts.capacity() * sizeof(stddev_counts) + h.before.capacity() * sizeof(float) + h.added.capacity() +
                  h.held.capacity() * sizeof(std::uint32_t) + h.held_values.capacity() * sizeof(float) + h.held_shares.capacity() +
@@ -299,6 +308,7 @@ private:
         std::vector<std::uint8_t> held_shares;  // shares (list_held_light)
         std::vector<std::uint32_t> left;     // pixels to rebuild that nothing reached (this frame)
         std::vector<std::uint32_t> dropped;  // find_dropped: this half's dropped pixels, row-major
+        std::vector<std::uint32_t> implausible;  // find_implausible: its implausible pixels, row-major
         reconstruct_scratch recon;
     };
 
@@ -345,6 +355,8 @@ private:
         // Stage 1 (parallel): standard deviations, bound, ESD candidates, per half.
         detail::stage_clock clock(rep.stage_ms);
         stddev_bands(hb);
+        for (half_state& s : halves_) s.implausible.clear();
+        if (options_.find_implausible) mark_implausible(a, b);
         exec_.run(2, [&](std::size_t h) { detect_candidates(halves_[h], rep.half[h]); });
         if (options_.find_dropped) mark_dropped(a, b, rep);
         clock.lap(frame_report::candidates);
@@ -481,12 +493,50 @@ private:
         }
     }
 
+    // find_implausible (implausible.hpp): where both halves are valid, the half whose value the
+    // other shows implausible becomes a non-finite pixel of its half (left out of every
+    // statistic, rebuilt from the other half), listed and counted (detect_candidates). The
+    // variances are the standard deviations' squares (the test is far from any rounding), in
+    // row bands on the executor, listed in pixel order.
+    template <class C, class V, class A>
+    void mark_implausible(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b) {
+        const int w = a.color.width(), h = a.color.height();
+        const double bound = detail::implausible_bound(a.color.pixel_count(), options_.alpha);
+        const std::size_t bands = detail::stddev_bands(h);
+        implausible_found_.assign(bands, {});
+        exec_.run(bands, [&](std::size_t band) {
+            const int y0 = static_cast<int>(band) * stddev_band_rows;
+            const int y1 = std::min(h, y0 + stddev_band_rows);
+            const std::uint8_t* lab[2] = {halves_[0].label.data(), halves_[1].label.data()};
+            const float* sd[2] = {halves_[0].sd.data(), halves_[1].sd.data()};
+            for (int y = y0; y < y1; ++y)
+                for (int x = 0; x < w; ++x) {
+                    const std::size_t i = index(x, y, w);
+                    if (cls(lab[0][i]) != valid_class || cls(lab[1][i]) != valid_class) continue;
+                    const double sa = sd[0][i], sb = sd[1][i];
+                    const int k = detail::implausible_half(mean_colour(a.color, x, y), mean_colour(b.color, x, y),
+                                                           sa * sa, sb * sb, bound);
+                    if (k >= 0) implausible_found_[band].push_back(2 * static_cast<std::uint64_t>(i) + static_cast<std::uint64_t>(k));
+                }
+        });
+        for (const std::vector<std::uint64_t>& found : implausible_found_)
+            for (const std::uint64_t f : found) {
+                const std::size_t i = static_cast<std::size_t>(f / 2);
+                half_state& s = halves_[f % 2];
+                s.label[i] = static_cast<std::uint8_t>((s.label[i] & ~pixel_class_bits) | nonfinite_class);
+                s.sd[i] = std::numeric_limits<float>::quiet_NaN();
+                s.implausible.push_back(static_cast<std::uint32_t>(i));
+            }
+    }
+
     void detect_candidates(half_state& s, half_report& r) {
         const std::size_t n = s.sd.size();
         stddev_counts c;
         for (const stddev_counts& b : s.band_counts) c += b;
+        c.valid -= s.implausible.size();  // counted valid by their band, then marked
         s.hist.build(s.sd.data(), n);
         r.pixels = n;
+        r.implausible = s.implausible.size();
         r.valid = c.valid;
         r.ignored = c.ignored;
         r.nonfinite = c.nonfinite;
@@ -1126,7 +1176,7 @@ private:
         r.highlights = highlights;
         r.consistent = consistent;
         r.fireflies = s.fix.size();
-        if (r.nonfinite + r.dropped > 0)
+        if (r.nonfinite + r.dropped + r.implausible > 0)
             for (std::size_t i = 0; i < s.label.size(); ++i)
                 if (cls(label[i]) == nonfinite_class) {
                     label[i] |= fix_bit;
@@ -1188,7 +1238,12 @@ private:
     void keep_before(const half_buffer<C, V, A>& hb, half_state& s) {
         const int w = hb.color.width(), nc = std::min(hb.color.channels(), 3);
         s.before.assign(s.fix.size() * 3, 0.0f);
-        for (std::size_t e = 0; e < s.fix.size(); ++e)
+        for (std::size_t e = 0; e < s.fix.size(); ++e) {
+            if (!s.implausible.empty() &&  // an implausible value is no light: none returned
+                std::binary_search(s.implausible.begin(), s.implausible.end(), s.fix[e])) {
+                for (int c = 0; c < 3; ++c) s.before[e * 3 + static_cast<std::size_t>(c)] = std::numeric_limits<float>::quiet_NaN();
+                continue;
+            }
             for (int c = 0; c < nc; ++c) {
                 const double v = hb.color.load(static_cast<int>(s.fix[e] % static_cast<std::uint32_t>(w)),
                                                static_cast<int>(s.fix[e] / static_cast<std::uint32_t>(w)), c);
@@ -1196,6 +1251,7 @@ private:
                 if (f > v) f = std::nextafter(f, -HUGE_VALF);  // never above the input (a double view)
                 s.before[e * 3 + static_cast<std::size_t>(c)] = f;
             }
+        }
     }
 
     // return_energy: energy.hpp on the cleaned half; never onto ignored (black, alpha 0) or
@@ -1358,6 +1414,7 @@ private:
     local_test_result local_result_;
     dropped_scratch dropped_scratch_;
     std::vector<dropped_pixel> dropped_found_;
+    std::vector<std::vector<std::uint64_t>> implausible_found_;  // per row band: 2 pixel + half
     std::vector<double> frame_log_p_;  // the one-half fireflies' p-values (log), for the frame's level
     std::vector<double> pair_log_p_;   // per pair and half: the p-value (log) of its excess; NaN: none
     std::vector<double> pair_base_;    // per pair: the level its ordinary samples give (pair_rise)

@@ -9,7 +9,7 @@ import pytest
 import firefly
 from conftest import arrays_of, make_frame, same_bits
 
-HALF_FIELDS = ["pixels", "valid", "ignored", "nonfinite", "dropped", "negative_variance", "median", "mad", "bound",
+HALF_FIELDS = ["pixels", "valid", "ignored", "nonfinite", "dropped", "implausible", "negative_variance", "median", "mad", "bound",
                "outliers", "local", "highlights", "consistent", "frame_kept", "fireflies", "repaired", "from_other_half", "unreachable", "phase1_rounds",
                "phase2_iterations", "final_change", "reconstruction"]
 FRAME_FIELDS = ["ok", "error", "both_outliers", "variance_calibration", "single_level", "lambdas_computed", "scratch_bytes", "stage_ms", "half"]
@@ -89,7 +89,7 @@ def test_options_round_trip():
                "highlight_rule": "agree", "max_ratio": 3.0, "max_relative_error": 0.6, "min_excess_z": 0.0,
                "cluster_relative_error": 0.0, "kernel_width": 7, "sigma": 1.5, "tolerance": 1e-2,
                "max_iterations": 0, "rebuild": "spatial", "blend_spatial": False, "reconstruct": False,
-               "find_dropped": False, "return_energy": True, "energy_sigma": 4.0, "energy_coarse_sigma": 16.0,
+               "find_dropped": False, "find_implausible": False, "return_energy": True, "energy_sigma": 4.0, "energy_coarse_sigma": 16.0,
                "local_test": False, "local_false_alarm": 1e-3, "local_radius": 2, "local_min_neighbours": 4,
                "local_variance_scale": 2.0, "local_spatial": False, "local_homogeneity": 0.05}
     assert set(changed) == set(defaults)  # every option is covered here
@@ -189,3 +189,25 @@ def test_a_bucket_written_black_is_found_and_rebuilt():
     off = firefly.Detector(find_dropped=False).process(**kept)
     assert off.half[0].dropped == 0 and off.half[0].ignored == 256
     assert (kept["a_color"][30:46, 40:56] == 0).all()
+
+
+def test_a_bucket_of_garbage_is_found_implausible_and_rebuilt():
+    """A 16x16 square of 1e30 in half A's colour, its variance kept: implausible, MASK_NONFINITE,
+    rebuilt from half B as a NaN square is, bit for bit; off with find_implausible=False."""
+    frames = [make_frame(seed=3) for _ in range(3)]
+    frames[0]["a_color"][30:46, 40:56] = 1e30
+    frames[1]["a_color"][30:46, 40:56] = np.nan
+    frames[2]["a_color"][30:46, 40:56] = 1e30
+    h, w = frames[0]["a_color"].shape[:2]
+    masks = [[np.zeros((h, w), np.uint8) for _ in range(2)] for _ in range(2)]
+    rep = firefly.Detector().process(**arrays_of(frames[0]), a_mask=masks[0][0], b_mask=masks[0][1])
+    nan = firefly.Detector().process(**arrays_of(frames[1]), a_mask=masks[1][0], b_mask=masks[1][1])
+    assert rep.ok and rep.half[0].implausible == 256 and rep.half[1].implausible == 0
+    assert rep.as_dict()["half"][0]["implausible"] == 256 and nan.half[0].nonfinite == 256
+    assert (masks[0][0][30:46, 40:56] & firefly.MASK_NONFINITE).all()
+    for key in ("a_color", "b_color", "a_variance", "b_variance"):
+        assert same_bits(frames[0][key], frames[1][key])
+    assert all((a == b).all() for a, b in zip(masks[0], masks[1]))
+    assert frames[0]["a_color"].max() < 1e3
+    off = firefly.Detector(find_implausible=False).process(**arrays_of(frames[2]))
+    assert off.half[0].implausible == 0 and (frames[2]["a_color"][30:46, 40:56] >= 1e30).mean() > 0.5  # mostly kept

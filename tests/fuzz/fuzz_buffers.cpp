@@ -159,7 +159,8 @@ void check_frame(const frame_shape& f, const std::vector<image_storage<T>> (&s)[
         }
         marked += in_buffer;
     }
-    if (r.fireflies + r.nonfinite + r.dropped != marked) fail("fireflies + nonfinite + dropped differ from the masks");
+    if (r.fireflies + r.nonfinite + r.dropped + r.implausible != marked)
+        fail("fireflies + nonfinite + dropped + implausible differ from the masks");
     if (f.k > 2 && left_pixels != r.left) fail("left masks differ from report.left");
     if (f.k == 2 && r.left != std::max(r.pair.half[0].unreachable, r.pair.half[1].unreachable))
         fail("K = 2: report.left differs from the halves' unreachable");
@@ -224,7 +225,8 @@ void run(FuzzedDataProvider& p) {
     bool same_masks = true;
     for (std::size_t i = 0; i < mask.size(); ++i)
         for (std::size_t j = 0; j < mask[i].size(); ++j) same_masks = same_masks && ((mask[i][j] ^ dmask[i][j]) & decided) == 0;
-    if ((dr.pixels == 0) != (r.pixels == 0) || dr.fireflies != r.fireflies || dr.nonfinite != r.nonfinite || !same_masks) {
+    if ((dr.pixels == 0) != (r.pixels == 0) || dr.fireflies != r.fireflies || dr.nonfinite != r.nonfinite ||
+        dr.implausible != r.implausible || !same_masks) {
         std::fprintf(stderr, "K %d %dx%d: detect %zu + %zu (%s), process %zu + %zu (%s), masks %s\n", k, w, h, dr.fireflies,
                      dr.nonfinite, dr.error.message(), r.fireflies, r.nonfinite, r.error.message(), same_masks ? "same" : "differ");
         fail("detect() and process() disagree");
