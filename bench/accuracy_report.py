@@ -36,10 +36,29 @@ def load(path):
     return data, rows
 
 
+# The denoisers of bench/downstream.py, in the order the report shows them.
+DENOISER_NAMES = {"nl_means": "NL-means", "wavelet": "wavelet shrinkage", "tv": "total variation"}
+
+
+def denoisers_of(ds):
+    """name -> {"strengths", "scenes"} (a file of NL-means alone, the earlier format, too)."""
+    if not ds:
+        return {}
+    if "denoisers" in ds:
+        return ds["denoisers"]
+    return {"nl_means": ds}
+
+
 def attach_downstream(rows, ds):
-    scenes = (ds or {}).get("scenes", {})
+    """r["ds"], r["ds_h"]: NL-means' relMSE and strength; r["dsx"]: every denoiser's relMSE."""
+    dn = denoisers_of(ds)
     for r in rows:
-        d = scenes.get(r["scene"], {}).get(r["method"])
+        r["dsx"] = {}
+        for name, d in dn.items():
+            v = d.get("scenes", {}).get(r["scene"], {}).get(r["method"])
+            if v:
+                r["dsx"][name] = v["relmse"]
+        d = dn.get("nl_means", {}).get("scenes", {}).get(r["scene"], {}).get(r["method"])
         r["ds"] = d["relmse"] if d else None
         r["ds_h"] = d["factor"] if d else None
 
@@ -92,23 +111,65 @@ def scene_table(sc, rs):
     print()
 
 
-def downstream_table(rows):
-    """Scenes down, methods across: relMSE after NL-means (the prefilter's own relMSE below it
-    is in the per-scene tables)."""
-    cols = ["input", "firefly", "firefly_paper", "cycles_prefilter", "bcd_spikes", "median3x3", "nrd_clamp", "clamp4"]
+DOWNSTREAM_COLUMNS = ["input", "firefly", "firefly_paper", "cycles_prefilter", "bcd_spikes", "median3x3", "nrd_clamp",
+                      "clamp4"]
+
+
+def downstream_table(rows, name="nl_means"):
+    """Scenes down, methods across: relMSE after one denoiser (the prefilter's own relMSE is in
+    the per-scene tables)."""
+    cols = DOWNSTREAM_COLUMNS
     at = {(r["scene"], r["method"]): r for r in rows}
-    scenes = sorted({r["scene"] for r in rows if r["ds"] is not None}, key=lambda s: (s in REAL, s))
+    scenes = sorted({r["scene"] for r in rows if name in r["dsx"]}, key=lambda s: (s in REAL, s))
     if not scenes:
         return
-    print("relMSE after NL-means at each method's best strength (`input`: the denoiser alone); "
-          "the lowest of each row in bold.\n")
+    print(f"relMSE after {DENOISER_NAMES.get(name, name)} at each method's best strength (`input`: the denoiser "
+          "alone); the lowest of each row in bold.\n")
     print("| scene | " + " | ".join("denoiser alone" if c == "input" else c for c in cols) + " |")
     print("|---" + "|---:" * len(cols) + "|")
     for sc in scenes:
-        vals = [at.get((sc, c), {}).get("ds") for c in cols]
+        vals = [at.get((sc, c), {}).get("dsx", {}).get(name) for c in cols]
         low = min(v for v in vals if v is not None)
         cells = ["-" if v is None else (f"**{v:.4g}**" if v == low else f"{v:.4g}") for v in vals]
         print(f"| {sc} | " + " | ".join(cells) + " |")
+    print()
+
+
+def geo(values):
+    return math.exp(sum(math.log(max(v, 1e-12)) for v in values) / len(values)) if values else None
+
+
+def across_denoisers(rows, targets):
+    """Per denoiser, over the scenes it ran on: where firefly is the lowest of the
+    highlight-keeping prefilters (a tie counts, as in the targets) and where it is no worse than
+    the denoiser alone; geometric means of firefly, the best such peer per scene and the denoiser
+    alone."""
+    names = [n for n in DENOISER_NAMES if any(n in r["dsx"] for r in rows)]
+    if len(names) < 2:
+        return
+    print("Across the denoisers: on how many scenes firefly is the lowest of the highlight-keeping "
+          "prefilters after each (a tie counts), and no worse than the denoiser alone; the geometric "
+          "means over those scenes of firefly, the best highlight-keeping peer of each scene, and "
+          "the denoiser alone.\n")
+    print("| denoiser | firefly lowest of the keeping peers | firefly no worse than the denoiser alone | "
+          "firefly (geo. mean) | best keeping peer (geo. mean) | denoiser alone (geo. mean) | not lowest on |")
+    print("|---|---:|---:|---:|---:|---:|---|")
+    for name in names:
+        lowest, no_worse, ff, peer, alone, missed = 0, 0, [], [], [], []
+        scenes = sorted({r["scene"] for r in rows if name in r["dsx"]}, key=lambda s: (s in REAL, s))
+        for sc in scenes:
+            r, inp = targets.get(sc, "firefly"), targets.get(sc, "input")
+            peers = [p["dsx"][name] for p in targets.keeping_peers(sc) if name in p["dsx"]]
+            if not r or name not in r["dsx"] or not peers or not inp or name not in inp["dsx"]:
+                continue
+            v = r["dsx"][name]
+            lowest += v <= min(peers)
+            no_worse += v <= inp["dsx"][name]
+            ff.append(v), peer.append(min(peers)), alone.append(inp["dsx"][name])
+            if v > min(peers):
+                missed.append(sc)
+        print(f"| {DENOISER_NAMES[name]} | {lowest} of {len(ff)} | {no_worse} of {len(ff)} | {fmt(geo(ff))} | "
+              f"{fmt(geo(peer))} | {fmt(geo(alone))} | {', '.join(missed) or '-'} |")
     print()
 
 
@@ -433,7 +494,9 @@ This run: simulated frames {size}, {date}, {cpus} CPUs ({load}).
   fast mode, sigma from `estimate_sigma`), at the strength h in {0.5, 2, 8, 32} x sigma that
   gives that method its lowest relMSE (one grid for all; fireflies survive NL-means unless h is
   far above the noise); `input` there is the denoiser alone (after the shared
-  non-finite repair, which NL-means needs). See `bench/downstream.py`.
+  non-finite repair, which NL-means needs). The same after two denoisers of other kinds, so
+  that no conclusion rests on one: wavelet shrinkage (BayesShrink, soft) and total variation
+  (Chambolle), each at its best of {0.25, 0.5, ..., 64} x sigma. See `bench/downstream.py`.
 - **ms**: time per frame (both halves, or all K buffers), Release build, on a machine shared
   with other work: compare within one run.
 
@@ -493,6 +556,12 @@ def main():
     summary_table(summary)
     print("## After a real denoiser\n")
     downstream_table(rows)
+    if any(len(r["dsx"]) > 1 for r in rows):
+        print("### After denoisers of two other kinds\n")
+        for name in DENOISER_NAMES:
+            if name != "nl_means":
+                downstream_table(rows, name)
+        across_denoisers(rows, t)
     print("## K buffers\n")
     print("relMSE on the scenes with K > 2 buffers (hl: highlights kept, simulated scenes); the "
           "half-buffer methods run on two halves of the same samples.\n")
