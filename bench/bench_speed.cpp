@@ -529,6 +529,7 @@ int register_all() {
     add_frame("failed_bucket", k2, false, false, true);
     add_frame("no_bucket", k2, false, false, false);
     add_frame("dropped_bucket", k2, false, false, false);  // the failed bucket written black
+    add_frame("garbage_bucket", k2, false, false, false);  // the failed bucket holding 1e30
     add_frame("dense30", k2, false, true, true);
     for (unsigned n : {1u, 2u})
         benchmark::RegisterBenchmark(("one_half/stddev/caustics/" + k2.label() + "/threads:" + std::to_string(n)).c_str(),

@@ -2,6 +2,7 @@
 // buffers) shows no Monte Carlo estimate holds is rebuilt as a non-finite one is.
 #include <firefly/firefly.hpp>
 #include <firefly/sim/scene.hpp>
+#include <firefly/sim/metrics.hpp>
 #include <firefly/sim/scenes.hpp>
 
 #include <algorithm>
@@ -172,6 +173,36 @@ TEST_CASE("a tile of 1e30 in half A is rebuilt from half B, exactly as a NaN til
             }
     CHECK(most <= most_in);  // nothing of the tile anywhere
     CHECK((bad.v.mask[0][bad.v.at(tiled_frame::x0 + 5, tiled_frame::y0 + 5)] & mask_bits::nonfinite) != 0);
+}
+
+TEST_CASE("the simulator's garbage bucket is rebuilt as its failed (NaN) bucket is", "[implausible][pipeline][sim]") {
+    const sim::scene garbage = sim::named_scene("garbage_bucket", 192, 128, 7);
+    sim::scene failed = garbage;
+    failed.effects = (failed.effects & ~static_cast<std::uint32_t>(sim::garbage_bucket)) | sim::failed_bucket;
+    frame_views g(sim::simulate(garbage)), n(sim::simulate(failed));
+    detector dg, dn;
+    const frame_report rg = g.process(dg), rn = n.process(dn);
+    REQUIRE(rg.ok());
+    const std::size_t square = 24u * 24u;  // 1/8 of the width
+    CHECK(rg.half[0].implausible == square);
+    CHECK(rn.half[0].nonfinite == square);
+    for (int k = 0; k < 2; ++k) {
+        CHECK(g.f.color[k] == n.f.color[k]);
+        CHECK(g.f.variance[k] == n.f.variance[k]);
+        CHECK(g.mask[k] == n.mask[k]);
+    }
+    // the frame comes out about as well as the same frame with no bucket at all
+    sim::scene intact_sc = garbage;
+    intact_sc.effects &= ~static_cast<std::uint32_t>(sim::garbage_bucket);
+    frame_views intact(sim::simulate(intact_sc));
+    detector di;
+    (void)intact.process(di);
+    const sim::frame original = sim::simulate(garbage), intact_original = sim::simulate(intact_sc);
+    const std::vector<float>* cleaned[2] = {&g.f.color[0], &g.f.color[1]};
+    const std::vector<float>* cleaned_intact[2] = {&intact.f.color[0], &intact.f.color[1]};
+    const double err = sim::evaluate(original, cleaned).relmse, err_intact = sim::evaluate(intact_original, cleaned_intact).relmse;
+    INFO("relMSE " << err << ", intact " << err_intact);
+    CHECK(err < 1.2 * err_intact);
 }
 
 TEST_CASE("find_implausible off, and detect(): the tile is found, or left", "[implausible][pipeline]") {

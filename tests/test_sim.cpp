@@ -166,7 +166,8 @@ namespace {
 constexpr std::uint32_t all_effects =
     sim::gradient | sim::fine_detail | sim::varying_noise | sim::fireflies | sim::highlights |
     sim::wide_highlight | sim::black_background | sim::alpha_coverage | sim::nonfinite | sim::negative |
-    sim::log_gradient | sim::caustics | sim::failed_bucket | sim::bright_region | sim::dropped_bucket;
+    sim::log_gradient | sim::caustics | sim::failed_bucket | sim::bright_region | sim::dropped_bucket |
+    sim::garbage_bucket;
 
 bool same_bits(const float* a, const float* b, std::size_t n) { return std::memcmp(a, b, n * sizeof(float)) == 0; }
 
@@ -232,14 +233,14 @@ TEST_CASE("every effect leaves the pixels outside its footprint bit-identical", 
         for (const bool relative : {false, true}) {
             s.firefly_relative = relative;
             s.firefly_energy = relative ? 5.0 : 400.0;
-            for (int bit = 0; bit < 15; ++bit) {
+            for (int bit = 0; bit < 16; ++bit) {
                 const sim::effect e = static_cast<sim::effect>(1u << bit);
                 // Coverage is one effect seen twice: either of the pair masks the background;
-                // the failed and the dropped bucket are one square (NaN or black).
+                // the failed, dropped and garbage buckets are one square (NaN, black or 1e30).
+                constexpr std::uint32_t buckets = sim::failed_bucket | sim::dropped_bucket | sim::garbage_bucket;
                 const std::uint32_t pair = e == sim::black_background ? sim::alpha_coverage
                                            : e == sim::alpha_coverage ? sim::black_background
-                                           : e == sim::failed_bucket  ? sim::dropped_bucket
-                                           : e == sim::dropped_bucket ? sim::failed_bucket
+                                           : (e & buckets) != 0       ? buckets & ~static_cast<std::uint32_t>(e)
                                                                       : 0u;
                 s.effects = all_effects & ~static_cast<std::uint32_t>(e) & ~pair;
                 check_independence(s, e, 2);
@@ -384,6 +385,29 @@ TEST_CASE("dropped bucket: a black square in half A only", "[sim][scenes]") {
     CHECK(black[0] == 32u * 32u);  // the failed bucket's square
     CHECK(black[1] == 0);
     CHECK(nonfinite == 0);
+}
+
+TEST_CASE("garbage bucket: a square of 1e30 in half A only, its variance as rendered", "[sim][scenes]") {
+    sim::scene sc = sim::named_scene("garbage_bucket", 256, 192, 6);
+    const sim::frame f = sim::simulate(sc);
+    sc.effects &= ~static_cast<std::uint32_t>(sim::garbage_bucket);
+    const sim::frame intact = sim::simulate(sc);
+    std::size_t garbage[2] = {0, 0}, mismatch = 0, other = 0;
+    for (std::size_t i = 0; i < f.pixels(); ++i)
+        for (int h = 0; h < 2; ++h) {
+            bool all = true;
+            for (std::size_t c = 0; c < 3; ++c) all = all && f.color[h][i * 3 + c] == 1e30f;
+            garbage[h] += all;
+            mismatch += all != f.bad(h, i);
+            for (std::size_t c = 0; c < 3; ++c) {
+                other += f.variance[h][i * 3 + c] != intact.variance[h][i * 3 + c];  // variance as rendered
+                other += !all && f.color[h][i * 3 + c] != intact.color[h][i * 3 + c];
+            }
+        }
+    CHECK(garbage[0] == 32u * 32u);  // the failed bucket's square
+    CHECK(garbage[1] == 0);
+    CHECK(mismatch == 0);
+    CHECK(other == 0);
 }
 
 TEST_CASE("interior: dark, noisy everywhere, moderate dense fireflies, a bright ceiling", "[sim][scenes]") {

@@ -39,6 +39,7 @@ struct pixel_model {
     bool highlight = false;
     bool bucket = false;   // failed_bucket: NaN in buffer 0
     bool dropped = false;  // dropped_bucket: black in buffer 0
+    bool garbage = false;  // garbage_bucket: 1e30 colour in buffer 0
     std::uint32_t touched = 0;
 };
 
@@ -57,6 +58,9 @@ inline double rate_to_probability(double rate, double n) noexcept {
 }
 
 class layout {
+    // The effects that share the failed bucket's square.
+    static constexpr std::uint32_t buckets = failed_bucket | dropped_bucket | garbage_bucket;
+
 public:
     explicit layout(const scene& sc) : sc_(sc), w_(std::max(sc.width, 0)), h_(std::max(sc.height, 0)), fx_(sc.effects) {
         const double n = std::max(sc.spp, 2);
@@ -120,10 +124,11 @@ public:
             p.sign = -0.2;  // the same pixels in every buffer
             p.touched |= negative;
         }
-        if ((fx_ & (failed_bucket | dropped_bucket)) && x >= bx_ && x < bx1_ && y >= by_ && y < by1_) {
+        if ((fx_ & buckets) && x >= bx_ && x < bx1_ && y >= by_ && y < by1_) {
             p.bucket = (fx_ & failed_bucket) != 0;
             p.dropped = (fx_ & dropped_bucket) != 0;
-            p.touched |= fx_ & (failed_bucket | dropped_bucket);
+            p.garbage = (fx_ & garbage_bucket) != 0;
+            p.touched |= fx_ & buckets;
         }
         static constexpr double tint[3] = {1.0, 0.85, 0.7};
         for (int c = 0; c < 3; ++c) p.mu[c] = b * tint[c];

@@ -194,6 +194,9 @@ inline std::uint32_t damage_pixel(const pixel_model& p, int x, std::size_t i, in
         out.nonfinite[b][i] = 1;
     } else if (p.dropped && b == 0) {
         for (int c = 0; c < 3; ++c) out.color[b][i * 3 + c] = out.variance[b][i * 3 + c] = 0.0f;
+    } else if (p.garbage && b == 0) {
+        for (int c = 0; c < 3; ++c) out.color[b][i * 3 + c] = 1e30f;
+        out.nonfinite[b][i] = 1;
     }
     return touched;
 }
@@ -210,7 +213,7 @@ inline void allocate(const scene& sc, int k, buffers& f) {
     for (int b = 0; b < k; ++b) {
         if (fx & (fireflies | caustics)) f.firefly_energy[b].assign(np, 0.0f);
     if (fx & (fireflies | caustics)) f.firefly_expected.assign(np, 0.0f);
-        if (fx & (nonfinite | failed_bucket)) f.nonfinite[b].assign(np, 0);
+        if (fx & (nonfinite | failed_bucket | garbage_bucket)) f.nonfinite[b].assign(np, 0);
     }
     f.expected.assign(np * 3, 0.0f);
     f.highlight.assign(np, 0);

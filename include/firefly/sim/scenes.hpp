@@ -56,6 +56,9 @@ inline bool named_accuracy_scene(const std::string& name, scene& s) {
     } else if (name == "failed_bucket") {
         // A render bucket that failed in half A: a NaN square 1/8 of the width, half B intact.
         s.effects = gradient | fireflies | failed_bucket;
+    } else if (name == "garbage_bucket") {
+        // The bucket failed with finite garbage: 1e30 colour in half A, its variance sane.
+        s.effects = gradient | fireflies | garbage_bucket;
     } else if (name == "dropped_bucket") {
         // The same bucket written black instead: colour and variance 0 in half A, half B intact.
         s.effects = gradient | fireflies | dropped_bucket;

@@ -27,6 +27,8 @@ enum effect : std::uint32_t {
     bright_region = 1u << 13,    // a bright, noisy, legitimate region (a lit ceiling, a light beam)
     dropped_bucket = 1u << 14,   // the failed bucket's square written black (colour and variance
                                  // 0) in buffer 0 only, as a renderer that never wrote it
+    garbage_bucket = 1u << 15,   // the failed bucket's square holding 1e30 in every colour channel
+                                 // of buffer 0 only, its variance as rendered (finite garbage)
 };
 
 struct scene {
@@ -75,7 +77,8 @@ struct frame {
                                          // half's pixel mean (0: no firefly sample); empty when
                                          // the scene has no fireflies or caustics
     std::vector<std::uint8_t> highlight; // 1: highlight pixel (spot, wide disk, bright region)
-    std::vector<std::uint8_t> nonfinite[2];  // empty unless nonfinite or failed_bucket
+    std::vector<std::uint8_t> nonfinite[2];  // bad values (NaN/Inf, a failed or garbage bucket);
+                                             // empty unless nonfinite, failed_ or garbage_bucket
     std::vector<std::uint32_t> touched;  // per pixel: the effects that changed it (its footprint
                                          // bits); empty when the scene has no effect
     std::uint32_t effects = 0;
