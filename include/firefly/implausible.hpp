@@ -23,8 +23,9 @@
 // implausible one: a legitimate half carries its own variance, so z is that large only when
 // the other half's value dwarfs it. It is rebuilt as a non-finite pixel is: from the other
 // half, left out of every statistic, of the sources, and of the energy return. A variance of 0
-// (one sample, or no variance written) leaves the level floor alone to decide; no noise and no
-// level (a half at 0): no test.
+// in either half says nothing (one sample a half, or no variance written): no test there; at
+// one sample a half the level floor alone would call a bright emitter's edge (the sun's 1e5
+// beside a sky of 1e-3) implausible.
 // Not found: a tile whose variance is wrong with its colour (a tile scaled 10x with 100x the
 // variance stays within the t's tail, and is judged as fireflies are); garbage where the other
 // half is unusable too (NaN, black) at the same pixel: it is the only value there, and a NaN or
@@ -51,11 +52,12 @@ inline double implausible_bound(std::size_t pixels, double alpha) noexcept {
 // halves' mean colours (finite); va, vb: their reduced variances (finite, >= 0). Taken without
 // overflow for values near DBL_MAX: the difference of halves against the noise, each halved.
 inline int implausible_half(double la, double lb, double va, double vb, double bound) noexcept {
+    if (!(va > 0) || !(vb > 0)) return -1;
     const double half_gap = std::fabs(0.5 * la - 0.5 * lb);
     const double v = va + vb;  // (hypot only where the sum overflows: it is slow)
     const double sd = v <= DBL_MAX ? std::sqrt(v) : std::hypot(std::sqrt(va), std::sqrt(vb));
     const double half_noise = 0.5 * std::max(sd, std::min(std::fabs(la), std::fabs(lb)));
-    if (!(half_noise > 0) || !(half_gap > bound * half_noise)) return -1;
+    if (!(half_gap > bound * half_noise)) return -1;
     return std::fabs(la) >= std::fabs(lb) ? 0 : 1;
 }
 
@@ -73,8 +75,8 @@ inline int implausible_half(double la, double lb, double va, double vb, double b
 // (implausible_bound over pixels x K: the largest of K at each pixel; 2.3e8 for a 2K frame of 8
 // buffers at alpha = 0.05) times C(u, i - 1), Bonferroni over the buffers set aside above the
 // i-th (two tiles of the same garbage in two buffers are found together). The first i that
-// passes takes the top i, returned as bits (0: none). No noise at all (R in exact agreement at
-// level 0, or known variances of 0 there) is no test.
+// passes takes the top i, returned as bits (0: none). A known variance of 0 of the i-th says
+// nothing (as for two halves), and no noise at all (R in exact agreement at level 0): no test.
 inline std::uint64_t implausible_buffers(const double* level, const double* rel_var, const bool* use, int k,
                                          double bound) noexcept {
     int rank[64], u = 0;
@@ -103,6 +105,7 @@ inline std::uint64_t implausible_buffers(const double* level, const double* rel_
         const double mean = sum / n;
         for (int j = i; j < u; ++j) ss += (0.5 * level[rank[j]] - mean) * (0.5 * level[rank[j]] - mean);
         const double vc = half_var(c);
+        if (vc == 0) continue;
         const double noise = vc >= 0 ? std::sqrt(vc + (known > 0 ? vr / known / n : 0.0))
                                      : std::sqrt(ss / (n - 1)) * std::sqrt(1.0 + 1.0 / n);
         const double half_noise = std::max(noise, std::fabs(mean));
