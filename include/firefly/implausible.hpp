@@ -79,6 +79,13 @@ inline int implausible_half(double la, double lb, double va, double vb, double b
 // nothing (as for two halves), and no noise at all (R in exact agreement at level 0): no test.
 inline std::uint64_t implausible_buffers(const double* level, const double* rel_var, const bool* use, int k,
                                          double bound) noexcept {
+    // Most pixels: levels of one sign within the bound of each other, where no step can pass
+    // (the noise is at least R's level, which is at least the least level)
+    double lo = HUGE_VAL, hi = 0;
+    bool positive = true;
+    for (int i = 0; i < k && i < 64; ++i)
+        if (use[i]) lo = std::min(lo, level[i]), hi = std::max(hi, level[i]), positive = positive && level[i] > 0;
+    if (positive && hi <= bound * lo) return 0;
     int rank[64], u = 0;
     auto above = [&](int a, int b) {  // a ranks before b
         const double ma = std::fabs(level[a]), mb = std::fabs(level[b]);
