@@ -217,10 +217,9 @@ def summarize(sim):
     for m, rs in by.items():
         if is_kbuf(m):
             continue
-        geo = math.exp(sum(math.log(max(r["relmse"], 1e-12)) for r in rs) / len(rs))
         dss = [r["ds"] for r in rs if r["ds"] is not None]
-        dgeo = math.exp(sum(math.log(max(d, 1e-12)) for d in dss) / len(dss)) if len(dss) == len(rs) else None
-        out.append(dict(method=m, ms=sum(r["ms"] for r in rs) / len(rs), relmse=geo, ds=dgeo,
+        out.append(dict(method=m, ms=sum(r["ms"] for r in rs) / len(rs), relmse=geo([r["relmse"] for r in rs]),
+                        ds=geo(dss) if len(dss) == len(rs) else None,
                         recall=min(r["recall"] for r in rs), fp=max(r["false_positive"] for r in rs),
                         hl=min(r["highlight_kept"] for r in rs), worse=max(r["worse_of_changed"] for r in rs),
                         ok=sum(meets(r) for r in rs), n=len(rs)))
@@ -409,7 +408,7 @@ def real_downstream(rows):
         if not is_sim(r) and r["ds"] is not None:
             by[r["method"]].append(r)
     n = max((len(v) for v in by.values()), default=0)
-    return [(sum(r["ms"] for r in rs) / n, math.exp(sum(math.log(max(r["ds"], 1e-12)) for r in rs) / n), m, True)
+    return [(sum(r["ms"] for r in rs) / n, geo([r["ds"] for r in rs]), m, True)
             for m, rs in by.items() if len(rs) == n and not is_kbuf(m)]
 
 

@@ -419,7 +419,7 @@ cross_buffer_report pair_counts(const frame_report& r) {
         c.dropped += h.dropped;
         c.implausible += h.implausible;
         c.left += h.unreachable;
-        c.per_buffer.push_back(h.fireflies + h.nonfinite + h.dropped + h.implausible);
+        c.per_buffer.push_back(h.found());
         c.energy_removed += h.energy_removed;
         c.energy_returned += h.energy_returned;
     }

@@ -570,7 +570,7 @@ private:
             rep.nonfinite += hr.nonfinite;
             rep.dropped += hr.dropped;
             rep.implausible += hr.implausible;
-            rep.per_buffer[static_cast<std::size_t>(i)] = hr.fireflies + hr.nonfinite + hr.dropped + hr.implausible;
+            rep.per_buffer[static_cast<std::size_t>(i)] = hr.found();
             rep.left = std::max(rep.left, hr.unreachable);  // pixels: the larger half's count
         }
         rep.tested = rep.pair.half[0].valid;

@@ -101,7 +101,8 @@ inline std::uint64_t implausible_buffers(const double* level, const double* rel_
     for (int i = u / 2; i >= 1; --i) {
         const int n = u - i;  // |R|
         const int c = rank[i - 1];
-        if (n < 2 || !(std::fabs(level[c]) > std::fabs(level[rank[i]]))) continue;
+        const double vc = half_var(c);
+        if (n < 2 || vc == 0 || !(std::fabs(level[c]) > std::fabs(level[rank[i]]))) continue;
         double sum = 0, ss = 0, vr = 0;  // of the halved levels of R (no overflow near DBL_MAX)
         int known = 0;
         for (int j = i; j < u; ++j) {
@@ -111,8 +112,6 @@ inline std::uint64_t implausible_buffers(const double* level, const double* rel_
         }
         const double mean = sum / n;
         for (int j = i; j < u; ++j) ss += (0.5 * level[rank[j]] - mean) * (0.5 * level[rank[j]] - mean);
-        const double vc = half_var(c);
-        if (vc == 0) continue;
         const double noise = vc >= 0 ? std::sqrt(vc + (known > 0 ? vr / known / n : 0.0))
                                      : std::sqrt(ss / (n - 1)) * std::sqrt(1.0 + 1.0 / n);
         const double half_noise = std::max(noise, std::fabs(mean));

@@ -176,6 +176,10 @@ struct half_report {
     status reconstruction{};            // no_valid_pixels when pixels were left unreachable
     double energy_removed = 0.0;        // return_energy: sums over pixels of the mean colour
     double energy_returned = 0.0;       // the rebuild took away, and the energy return added
+
+    // What this half found to rebuild: fireflies, non-finite, dropped and implausible pixels
+    // (as a K-buffer report counts a buffer: cross_buffer_report::per_buffer).
+    std::size_t found() const noexcept { return fireflies + nonfinite + dropped + implausible; }
 };
 
 struct [[nodiscard]] frame_report {
