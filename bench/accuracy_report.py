@@ -15,7 +15,9 @@ import math
 import sys
 from collections import defaultdict
 
-REAL = ("cycles-caustics", "cycles-interior", "cycles-caustics-seeds")
+# The real renders (not simulated: no ground truth but a reference). The benchmark's context
+# names them ("renders"), with FIREFLY_ACCURACY_RENDERS' folders too; these are the default.
+REAL = ["cycles-caustics", "cycles-interior", "cycles-caustics-seeds"]
 PEERS = ("median3x3", "cycles_prefilter", "bcd_spikes", "nrd_clamp", "clamp4", "clamp16")
 COUNTERS = ("recall", "precision", "false_positive", "highlight_kept", "relmse", "changed", "worse",
             "worse_of_changed", "energy", "energy_dark", "energy_bright", "error", "highlight_not_lowered")
@@ -33,6 +35,9 @@ def load(path):
             continue
         ms = b["real_time"] if b.get("time_unit") == "ms" else b["real_time"] / 1e6
         rows.append(dict(scene=parts[1], method=parts[2], ms=ms, **{k: b.get(k) for k in COUNTERS}))
+    renders = data.get("context", {}).get("renders")
+    if renders:  # extends the list in place: every reader of REAL sees the renders of this run
+        REAL.extend(n for n in renders.split(",") if n and n not in REAL)
     return data, rows
 
 
@@ -456,7 +461,8 @@ centre crop of each simulated scene at any size (`FIREFLY_ACCURACY_CROP`) and no
 variants, to keep its cost affordable on two cores; the real renders are always whole. Real
 renders missing from `../shared/data` are skipped with a note. `/usr/bin/python3` is Debian's
 (python3-skimage, python3-matplotlib). `accuracy_report.py docs/accuracy.json` alone rebuilds
-this page from the merged file.
+this page from the merged file. `FIREFLY_ACCURACY_RENDERS=DIR[:DIR...]` adds renders of one's
+own laid out as those folders (`bench/renders/README.md`: held-out Blender scenes, measured).
 
 This run: simulated frames {size}, {date}, {cpus} CPUs ({load}).
 

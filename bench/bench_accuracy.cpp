@@ -5,7 +5,8 @@
 // variance is the renders' spread, and used whole by the K-buffer estimators). Each
 // benchmark's time is one frame; its counters are described in docs/accuracy.md and
 // computed in count_metrics below. Run with --benchmark_format=json and turn the output into
-// tables and a Pareto plot with bench/accuracy_report.py.
+// tables and a Pareto plot with bench/accuracy_report.py. FIREFLY_ACCURACY_RENDERS adds renders
+// of one's own (see extra_render_dirs).
 //
 // FIREFLY_ACCURACY_IMAGES=DIR writes, per scene, every downstream method's combined output
 // and the reference (DIR/<scene>/<method>.pfm) for bench/downstream.py, NL-means after each
@@ -495,15 +496,15 @@ void add_buffer_scenes(std::map<std::string, scene_data>& all, int w, int h) {
 
 std::string shared_dir(const char* scene) { return std::string(FIREFLY_SHARED_DATA) + "/" + scene + "/"; }
 
-// A real render with half buffers and variance (PFM copies of the EXR files).
-bool load_halves_render(scene_data& s, const char* scene) {
-    const std::string dir = shared_dir(scene);
+// A real render with half buffers and variance (PFM copies of the EXR files) in dir, named
+// scene in the tables.
+bool load_halves_render(scene_data& s, const std::string& scene, const std::string& dir) {
     firefly_tools::pfm_image img[5];
     const char* files[5] = {"a_color", "a_variance", "b_color", "b_variance", "reference"};
     for (int i = 0; i < 5; ++i) {
         const std::string err = firefly_tools::read_pfm(dir + files[i] + ".pfm", img[i]);
         if (!err.empty() || img[i].channels != 3 || img[i].width != img[0].width || img[i].height != img[0].height) {
-            std::fprintf(stderr, "note: %s: %s; its rows are skipped\n", scene, err.empty() ? "bad size" : err.c_str());
+            std::fprintf(stderr, "note: %s: %s; its rows are skipped\n", scene.c_str(), err.empty() ? "bad size" : err.c_str());
             return false;
         }
     }
@@ -536,21 +537,30 @@ void seed_half(scene_data& s, int h) {
     }
 }
 
-bool load_seed_renders(scene_data& s) {
-    const std::string dir = shared_dir("cycles-caustics-seeds");
+bool file_exists(const std::string& path) {
+    struct stat st;
+    return ::stat(path.c_str(), &st) == 0;
+}
+
+// K renders with different seeds, dir/render_0.exr ... (R, G, B; K even, >= 4: every one
+// present is read), named scene: K buffers, and split K/2 + K/2 into two halves whose variance
+// is the renders' spread.
+bool load_seed_renders(scene_data& s, const std::string& scene, const std::string& dir, const std::string& reference) {
     firefly_tools::pfm_image ref;
-    std::string err = firefly_tools::read_pfm(shared_dir("cycles-caustics") + "reference.pfm", ref);
-    for (int k = 0; k < 8 && err.empty(); ++k) {
+    std::string err = firefly_tools::read_pfm(reference, ref);
+    for (int k = 0; err.empty() && file_exists(dir + "render_" + std::to_string(k) + ".exr"); ++k) {
         firefly_tools::image img;
         err = firefly_tools::read_exr(dir + "render_" + std::to_string(k) + ".exr", {"R", "G", "B"}, img);
         if (err.empty() && (img.width != ref.width || img.height != ref.height)) err = "render size differs from the reference";
         if (err.empty()) s.buffers.push_back(std::move(img.pixels));
     }
+    if (err.empty() && s.buffers.empty()) err = dir + "render_0.exr: not found";
+    if (err.empty() && (s.buffers.size() < 4 || s.buffers.size() % 2)) err = "needs an even number of renders, at least 4";
     if (!err.empty()) {
-        std::fprintf(stderr, "note: cycles-caustics-seeds: %s; its rows are skipped\n", err.c_str());
+        std::fprintf(stderr, "note: %s: %s; its rows are skipped\n", scene.c_str(), err.c_str());
         return false;
     }
-    s.name = "cycles-caustics-seeds";
+    s.name = scene;
     s.f.width = ref.width;
     s.f.height = ref.height;
     s.f.expected = std::move(ref.pixels);
@@ -558,6 +568,28 @@ bool load_seed_renders(scene_data& s) {
     seed_half(s, 1);
     finish(s);
     return true;
+}
+
+// FIREFLY_ACCURACY_RENDERS=DIR[:DIR...]: more renders, a user's own, in the same tables. A folder
+// laid out as ../shared/data's half-buffer ones (a_color.pfm, a_variance.pfm, b_color.pfm,
+// b_variance.pfm, reference.pfm) is a scene named by the folder; render_0.exr ... beside the
+// reference (seed renders, bench/renders/halves.py --renders) one named folder-seeds.
+std::vector<std::string> extra_render_dirs() {
+    std::vector<std::string> dirs;
+    const char* env = std::getenv("FIREFLY_ACCURACY_RENDERS");
+    for (std::string rest = env ? env : ""; !rest.empty();) {
+        const std::size_t at = rest.find(':');
+        std::string dir = rest.substr(0, at);
+        while (dir.size() > 1 && dir.back() == '/') dir.pop_back();
+        if (!dir.empty()) dirs.push_back(dir);
+        rest = at == std::string::npos ? "" : rest.substr(at + 1);
+    }
+    return dirs;
+}
+
+std::string folder_name(const std::string& dir) {
+    const std::size_t at = dir.find_last_of('/');
+    return at == std::string::npos ? dir : dir.substr(at + 1);
 }
 
 int register_all() {
@@ -568,10 +600,32 @@ int register_all() {
     add_simulated(scenes, w, h);
     add_buffer_scenes(scenes, w, h);
     for (auto& [name, s] : scenes) register_scene(&s, 2);
-    static scene_data real[3];
-    if (load_halves_render(real[0], "cycles-caustics")) register_scene(&real[0], 3);
-    if (load_halves_render(real[1], "cycles-interior")) register_scene(&real[1], 3);
-    if (load_seed_renders(real[2])) register_scene(&real[2], 3);
+    static std::vector<std::unique_ptr<scene_data>> real;  // registered by address
+    std::string names;  // the renders' scene names, for the report (what is not simulated)
+    auto add = [&](bool loaded) {
+        if (!loaded) return real.pop_back();
+        register_scene(real.back().get(), 3);
+        names += (names.empty() ? "" : ",") + real.back()->name;
+    };
+    for (const char* scene : {"cycles-caustics", "cycles-interior"}) {
+        real.push_back(std::make_unique<scene_data>());
+        add(load_halves_render(*real.back(), scene, shared_dir(scene)));
+    }
+    real.push_back(std::make_unique<scene_data>());
+    add(load_seed_renders(*real.back(), "cycles-caustics-seeds", shared_dir("cycles-caustics-seeds"),
+                          shared_dir("cycles-caustics") + "reference.pfm"));
+    for (const std::string& dir : extra_render_dirs()) {
+        const std::string name = folder_name(dir), d = dir + "/";
+        if (file_exists(d + "a_color.pfm")) {
+            real.push_back(std::make_unique<scene_data>());
+            add(load_halves_render(*real.back(), name, d));
+        }
+        if (file_exists(d + "render_0.exr")) {
+            real.push_back(std::make_unique<scene_data>());
+            add(load_seed_renders(*real.back(), name + "-seeds", d, d + "reference.pfm"));
+        }
+    }
+    benchmark::AddCustomContext("renders", names);
     return 0;
 }
 const int registered = register_all();

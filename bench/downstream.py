@@ -37,15 +37,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-
-def read_pfm(path):
-    with open(path, "rb") as f:
-        magic = f.readline().strip()
-        w, h = (int(v) for v in f.readline().split())
-        scale = float(f.readline())
-        c = 3 if magic == b"PF" else 1
-        data = np.fromfile(f, dtype="<f4" if scale < 0 else ">f4", count=w * h * c)
-    return data.reshape(h, w, c)[::-1].astype(np.float64)  # PFM rows are bottom-up
+from pfm_io import read_pfm
 
 
 def relmse(x, ref):
@@ -92,7 +84,7 @@ def denoise_best(img, ref, denoise, strengths):
 
 def one(task):
     scene, path, ref_path, grids = task
-    img, ref = read_pfm(path), read_pfm(ref_path)
+    img, ref = read_pfm(path, np.float64), read_pfm(ref_path, np.float64)
     if img.shape != ref.shape:
         return scene, path, None
     return scene, path, {name: denoise_best(img, ref, DENOISERS[name][0], grid) for name, grid in grids.items()}
