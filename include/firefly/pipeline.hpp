@@ -624,6 +624,10 @@ private:
     // The factor that turns the given variance into a variance of the pixel mean, from
     // (A - B)^2 / (vA + vB) over ordinary pixels on a lattice of about 16k pixels, whatever
     // the resolution: a median of that many ratios is good to ~1%, and no one pixel moves it.
+    // The lattice is laid from the nearer edge of each axis, by one rule for both: a flipped
+    // or transposed frame samples the flipped or transposed pixels (from one edge, a 400-wide
+    // frame at step 2 took the odd columns, and flipped the even ones: the Cycles caustics'
+    // factor 1.1197 against 1.0910, and 36 decisions at the margin went the other way).
     template <class C, class V, class A>
     double calibrate(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b) {
         const std::uint8_t* lab[2] = {halves_[0].label.data(), halves_[1].label.data()};
@@ -632,8 +636,10 @@ private:
         calibration_.clear();
         const double cells = static_cast<double>(w) * static_cast<double>(hgt) / 16384.0;
         const int step = std::max(1, static_cast<int>(std::sqrt(cells)));
-        for (int y = step / 2; y < hgt; y += step)
-            for (int x = step / 2; x < w; x += step) {
+        auto on_lattice = [step](int v, int n) { return std::min(v, n - 1 - v) % step == step / 2; };
+        for (int y = 0; y < hgt; ++y)
+            for (int x = 0; x < w && on_lattice(y, hgt); ++x) {
+                if (!on_lattice(x, w)) continue;
                 const std::size_t i = index(x, y, w);
                 if (lab[0][i] != valid_class || lab[1][i] != valid_class) continue;
                 for (int c = 0; c < nc; ++c)
