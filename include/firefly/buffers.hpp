@@ -340,15 +340,12 @@ inline double step_statistic(const pixel_buffers& p, int i, double noise, bool w
     }
     if (!(yc > level)) return std::numeric_limits<double>::quiet_NaN();
     // Never below R's own noise: an edge or a highlight is noisier than its surroundings,
-    // and the buffers below the candidate say so.
+    // and the buffers below the candidate say so. Its spread is relative to R's mean, so taken
+    // to the level by (mean / level)^2 (1 exactly where the level is R's own; with variance a
+    // buffer's own relative variance, the same at any level).
     const double own = rest_noise(p, i, mean, with_variance);
-    double s;
-    if (level == mean) {
-        s = std::fabs(mean) * std::sqrt(std::max(noise, own >= 0 ? own : 0.0) * (1.0 + 1.0 / n));
-    } else {  // R's spread relative to the level (with variance: a buffer's own, already relative)
-        const double r = mean / level, own_at_level = own >= 0 ? (with_variance ? own : own * r * r) : 0.0;
-        s = level * std::sqrt(std::max(noise, own_at_level) * (1.0 + 1.0 / n));
-    }
+    const double r = mean / level, own_at_level = own >= 0 ? (with_variance ? own : own * r * r) : 0.0;
+    const double s = std::fabs(level) * std::sqrt(std::max(noise, own_at_level) * (1.0 + 1.0 / n));
     return s > 0 ? (yc - level) / s : HUGE_VAL;
 }
 

@@ -637,15 +637,16 @@ private:
         const double cells = static_cast<double>(w) * static_cast<double>(hgt) / 16384.0;
         const int step = std::max(1, static_cast<int>(std::sqrt(cells)));
         auto on_lattice = [step](int v, int n) { return std::min(v, n - 1 - v) % step == step / 2; };
-        for (int y = 0; y < hgt; ++y)
-            for (int x = 0; x < w && on_lattice(y, hgt); ++x) {
-                if (!on_lattice(x, w)) continue;
+        for (int y = 0; y < hgt; ++y) {
+            if (!on_lattice(y, hgt)) continue;
+            for (int x = 0; x < w; ++x) {
                 const std::size_t i = index(x, y, w);
-                if (lab[0][i] != valid_class || lab[1][i] != valid_class) continue;
+                if (!on_lattice(x, w) || lab[0][i] != valid_class || lab[1][i] != valid_class) continue;
                 for (int c = 0; c < nc; ++c)
                     calibration_.add(a.color.load(x, y, c), b.color.load(x, y, c),
                                      a.variance.load(x, y, nv == 1 ? 0 : c), b.variance.load(x, y, nv == 1 ? 0 : c));
             }
+        }
         return calibration_.factor();
     }
 
