@@ -548,9 +548,11 @@ bool file_exists(const std::string& path) {
 bool load_seed_renders(scene_data& s, const std::string& scene, const std::string& dir, const std::string& reference) {
     firefly_tools::pfm_image ref;
     std::string err = firefly_tools::read_pfm(reference, ref);
-    for (int k = 0; err.empty() && file_exists(dir + "render_" + std::to_string(k) + ".exr"); ++k) {
+    for (int k = 0; err.empty(); ++k) {
+        const std::string path = dir + "render_" + std::to_string(k) + ".exr";
+        if (!file_exists(path)) break;
         firefly_tools::image img;
-        err = firefly_tools::read_exr(dir + "render_" + std::to_string(k) + ".exr", {"R", "G", "B"}, img);
+        err = firefly_tools::read_exr(path, {"R", "G", "B"}, img);
         if (err.empty() && (img.width != ref.width || img.height != ref.height)) err = "render size differs from the reference";
         if (err.empty()) s.buffers.push_back(std::move(img.pixels));
     }
@@ -602,28 +604,24 @@ int register_all() {
     for (auto& [name, s] : scenes) register_scene(&s, 2);
     static std::vector<std::unique_ptr<scene_data>> real;  // registered by address
     std::string names;  // the renders' scene names, for the report (what is not simulated)
-    auto add = [&](bool loaded) {
-        if (!loaded) return real.pop_back();
-        register_scene(real.back().get(), 3);
-        names += (names.empty() ? "" : ",") + real.back()->name;
+    auto add = [&](auto&& load) {  // load(scene_data&) -> whether it loaded
+        auto s = std::make_unique<scene_data>();
+        if (!load(*s)) return;
+        register_scene(s.get(), 3);
+        names += (names.empty() ? "" : ",") + s->name;
+        real.push_back(std::move(s));
     };
-    for (const char* scene : {"cycles-caustics", "cycles-interior"}) {
-        real.push_back(std::make_unique<scene_data>());
-        add(load_halves_render(*real.back(), scene, shared_dir(scene)));
-    }
-    real.push_back(std::make_unique<scene_data>());
-    add(load_seed_renders(*real.back(), "cycles-caustics-seeds", shared_dir("cycles-caustics-seeds"),
-                          shared_dir("cycles-caustics") + "reference.pfm"));
+    for (const char* scene : {"cycles-caustics", "cycles-interior"})
+        add([&](scene_data& s) { return load_halves_render(s, scene, shared_dir(scene)); });
+    add([&](scene_data& s) {
+        return load_seed_renders(s, "cycles-caustics-seeds", shared_dir("cycles-caustics-seeds"),
+                                 shared_dir("cycles-caustics") + "reference.pfm");
+    });
     for (const std::string& dir : extra_render_dirs()) {
         const std::string name = folder_name(dir), d = dir + "/";
-        if (file_exists(d + "a_color.pfm")) {
-            real.push_back(std::make_unique<scene_data>());
-            add(load_halves_render(*real.back(), name, d));
-        }
-        if (file_exists(d + "render_0.exr")) {
-            real.push_back(std::make_unique<scene_data>());
-            add(load_seed_renders(*real.back(), name + "-seeds", d, d + "reference.pfm"));
-        }
+        if (file_exists(d + "a_color.pfm")) add([&](scene_data& s) { return load_halves_render(s, name, d); });
+        if (file_exists(d + "render_0.exr"))
+            add([&](scene_data& s) { return load_seed_renders(s, name + "-seeds", d, d + "reference.pfm"); });
     }
     benchmark::AddCustomContext("renders", names);
     return 0;

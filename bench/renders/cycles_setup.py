@@ -3,7 +3,6 @@
 Every render must stay an unbiased estimate of the pixel, so the settings turn off what a
 production render would use to hide fireflies: clamping, denoising, adaptive sampling.
 """
-import math
 
 import bpy
 import mathutils
@@ -66,7 +65,3 @@ def camera(scene, location, target, lens):
     cam.data.lens = lens
     aim(cam, target)
     scene.camera = cam
-
-
-def degrees(d):
-    return math.radians(d)

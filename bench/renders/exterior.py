@@ -5,9 +5,11 @@ what comes through the door (dark, noisy, with fireflies). A glass sphere casts 
 caustic on the stone floor; a chrome sphere reflects the sun (a true highlight); a rough gold
 sphere stands beside it.
 """
+import math
+
 import bpy
 
-from cycles_setup import box, degrees, material, sphere
+from cycles_setup import box, material, sphere
 
 
 def build(scene):
@@ -18,7 +20,7 @@ def build(scene):
     nt = world.node_tree
     sky = nt.nodes.new("ShaderNodeTexSky")
     sky.sky_type = 'NISHITA'
-    sky.sun_elevation, sky.sun_rotation, sky.sun_size = degrees(35), degrees(200), degrees(0.545)
+    sky.sun_elevation, sky.sun_rotation, sky.sun_size = math.radians(35), math.radians(200), math.radians(0.545)
     nt.links.new(sky.outputs[0], nt.nodes["Background"].inputs[0])
     nt.nodes["Background"].inputs[1].default_value = 0.2
     scene.world = world

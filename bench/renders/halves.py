@@ -26,7 +26,7 @@ def read_rgb(path):
     buf = oiio.ImageBuf(path)
     if buf.has_error:
         sys.exit(f"{path}: {buf.geterror()}")
-    return buf.get_pixels(oiio.FLOAT)[..., :3].astype(np.float64)
+    return buf.get_pixels(oiio.FLOAT)[..., :3]  # float32, as stored
 
 
 def write_exr(path, pixels, names):
@@ -52,17 +52,19 @@ def main():
     if a.renders and (a.renders < 2 or a.n % a.renders):
         sys.exit("K must be at least 2 and divide N")
     os.makedirs(a.dst, exist_ok=True)
+    # every render read once (float32 as stored; sums in float64 below)
+    renders = np.stack([read_rgb(os.path.join(a.src, f"seed_{i}.exr")) for i in range(a.n)])
     per = a.n // 2
     for h, name in enumerate("ab"):
-        renders = np.stack([read_rgb(os.path.join(a.src, f"seed_{i}.exr")) for i in range(h * per, (h + 1) * per)])
-        color, variance = renders.mean(0), renders.var(0, ddof=1) / per
+        half = renders[h * per:(h + 1) * per].astype(np.float64)
+        color, variance = half.mean(0), half.var(0, ddof=1) / per
         write_exr(os.path.join(a.dst, f"half_{name}.exr"), np.concatenate([color, variance], 2),
                   ("R", "G", "B", "Variance.R", "Variance.G", "Variance.B"))
         write_pfm(os.path.join(a.dst, f"{name}_color.pfm"), color)
         write_pfm(os.path.join(a.dst, f"{name}_variance.pfm"), variance)
     per = a.n // max(a.renders, 1)
     for k in range(a.renders):
-        mean = np.mean([read_rgb(os.path.join(a.src, f"seed_{i}.exr")) for i in range(k * per, (k + 1) * per)], 0)
+        mean = renders[k * per:(k + 1) * per].astype(np.float64).mean(0)
         write_exr(os.path.join(a.dst, f"render_{k}.exr"), mean, ("R", "G", "B"))
     write_pfm(os.path.join(a.dst, "reference.pfm"), read_rgb(a.reference or os.path.join(a.src, "reference.exr")))
 
