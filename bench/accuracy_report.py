@@ -16,8 +16,9 @@ import sys
 from collections import defaultdict
 
 # The real renders (not simulated: no ground truth but a reference). The benchmark's context
-# names them ("renders"), with FIREFLY_ACCURACY_RENDERS' folders too; these are the default.
-REAL = ["cycles-caustics", "cycles-interior", "cycles-caustics-seeds"]
+# names them ("renders"), with FIREFLY_ACCURACY_RENDERS' folders too; these are the default
+# for a file whose context does not.
+DEFAULT_REAL = ("cycles-caustics", "cycles-interior", "cycles-caustics-seeds")
 PEERS = ("median3x3", "cycles_prefilter", "bcd_spikes", "nrd_clamp", "clamp4", "clamp16")
 COUNTERS = ("recall", "precision", "false_positive", "highlight_kept", "relmse", "changed", "worse",
             "worse_of_changed", "energy", "energy_dark", "energy_bright", "error", "highlight_not_lowered")
@@ -35,9 +36,9 @@ def load(path):
             continue
         ms = b["real_time"] if b.get("time_unit") == "ms" else b["real_time"] / 1e6
         rows.append(dict(scene=parts[1], method=parts[2], ms=ms, **{k: b.get(k) for k in COUNTERS}))
-    renders = data.get("context", {}).get("renders")
-    if renders:  # extends the list in place: every reader of REAL sees the renders of this run
-        REAL.extend(n for n in renders.split(",") if n and n not in REAL)
+    real = set(DEFAULT_REAL) | set(n for n in data.get("context", {}).get("renders", "").split(",") if n)
+    for r in rows:
+        r["real"] = r["scene"] in real
     return data, rows
 
 
@@ -69,7 +70,13 @@ def attach_downstream(rows, ds):
 
 
 def is_sim(r):
-    return r["scene"] not in REAL
+    return not r["real"]
+
+
+def scene_order(rows):
+    """Sort key: the simulated scenes first, then the renders, each by name."""
+    real = {r["scene"] for r in rows if r["real"]}
+    return lambda s: (s in real, s)
 
 
 def is_kbuf(m):
@@ -125,7 +132,7 @@ def downstream_table(rows, name="nl_means"):
     the per-scene tables)."""
     cols = DOWNSTREAM_COLUMNS
     at = {(r["scene"], r["method"]): r for r in rows}
-    scenes = sorted({r["scene"] for r in rows if name in r["dsx"]}, key=lambda s: (s in REAL, s))
+    scenes = sorted({r["scene"] for r in rows if name in r["dsx"]}, key=scene_order(rows))
     if not scenes:
         return
     print(f"relMSE after {DENOISER_NAMES.get(name, name)} at each method's best strength (`input`: the denoiser "
@@ -161,7 +168,7 @@ def across_denoisers(rows, targets):
     print("|---|---:|---:|---:|---:|---:|---|")
     for name in names:
         lowest, no_worse, ff, peer, alone, missed = 0, 0, [], [], [], []
-        scenes = sorted({r["scene"] for r in rows if name in r["dsx"]}, key=lambda s: (s in REAL, s))
+        scenes = sorted({r["scene"] for r in rows if name in r["dsx"]}, key=scene_order(rows))
         for sc in scenes:
             r, inp = targets.get(sc, "firefly"), targets.get(sc, "input")
             peers = [p["dsx"][name] for p in targets.keeping_peers(sc) if name in p["dsx"]]
@@ -205,7 +212,7 @@ def buffers_table(rows):
             return "-"
         return f"{r['relmse']:.4g}" + ("" if r["highlight_kept"] is None else f" (hl {r['highlight_kept']:.2f})")
 
-    for sc in sorted(scenes, key=lambda s: (s in REAL, s)):
+    for sc in sorted(scenes, key=scene_order(rows)):
         ms = at[sc]
         mean = [r for m, r in ms.items() if m.startswith("mean_k")]
         kf = next((m for m in ms if m.startswith("firefly_k")), None)
@@ -572,7 +579,7 @@ def main():
           "half-buffer methods run on two halves of the same samples.\n")
     buffers_table(rows)
     print("## Per scene\n")
-    for sc in sorted({r["scene"] for r in rows}, key=lambda s: (s in REAL, s)):
+    for sc in sorted({r["scene"] for r in rows}, key=scene_order(rows)):
         scene_table(sc, [r for r in rows if r["scene"] == sc])
     if a.plot:
         plot(summary, a.plot, size, rows)

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "catch.hpp"
+#include "symmetry.hpp"
 
 using namespace firefly;
 
@@ -461,7 +462,7 @@ TEST_CASE("K buffers: detect() on const views changes nothing and reports what p
 }
 
 // The energy return (energy.hpp): nothing for a lone firefly, most of it where many fell,
-// nothing far away, flips give flipped bits, and extreme values stay finite.
+// nothing far away, flips and transposes give the same bits, and extreme values stay finite.
 namespace {
 frame_k constant_frame(int k, int w, int h, float level) {
     frame_k f;
@@ -569,28 +570,33 @@ TEST_CASE("K buffers: a pixel left non-finite keeps its bits where energy return
         CHECK(std::memcmp(&f.color[b][at], &before.color[b][at], 3 * sizeof(float)) == 0);  // (the NaN was quieted)
 }
 
-TEST_CASE("K buffers: a flipped frame gives the flipped result, energy return included", "[buffers][energy]") {
+TEST_CASE("K buffers: the 8 flips and transposes give the same bits, energy return included", "[buffers][energy][invariant]") {
     const sim::buffers orig = sim::simulate_buffers(sim::named_scene("dense10", 72, 40, 5), 8);
-    frame_k f = from_sim(orig), g = from_sim(orig);
-    const int w = f.w, h = f.h;
-    for (auto& c : g.color)
-        for (int y = 0; y < h; ++y)
-            for (int x = 0; x < w / 2; ++x)
-                for (int ch = 0; ch < 3; ++ch)
-                    std::swap(c[static_cast<std::size_t>((y * w + x) * 3 + ch)], c[static_cast<std::size_t>((y * w + w - 1 - x) * 3 + ch)]);
+    frame_k f = from_sim(orig);
+    const int k = static_cast<int>(f.color.size());
+    masks_k mf(k, f.w, f.h);
     cross_buffer_detector d;
-    const cross_buffer_report rf = d.process(f.views(false)), rg = d.process(g.views(false));
+    const cross_buffer_report rf = d.process(f.views(false), mf.views);
     REQUIRE(rf.ok());
-    REQUIRE(rg.ok());
     CHECK(rf.energy_returned > 0);
-    std::size_t differ = 0;
-    for (std::size_t b = 0; b < f.color.size(); ++b)
-        for (int y = 0; y < h; ++y)
-            for (int x = 0; x < w; ++x)
-                for (int ch = 0; ch < 3; ++ch)
-                    differ += f.color[b][static_cast<std::size_t>((y * w + x) * 3 + ch)] !=
-                              g.color[b][static_cast<std::size_t>((y * w + w - 1 - x) * 3 + ch)];
-    CHECK(differ == 0);
+    for (int sym = 1; sym < 8; ++sym) {
+        const firefly_test::symmetry t{sym, f.w, f.h};
+        frame_k g = from_sim(orig);
+        g.w = t.width();
+        g.h = t.height();
+        for (auto& c : g.color) c = t.apply(c, 3);
+        masks_k mg(k, g.w, g.h);
+        cross_buffer_detector dg(cross_buffer_options{}, sym == 5 ? executor::threads(2) : executor{});
+        const cross_buffer_report rg = dg.process(g.views(false), mg.views);
+        REQUIRE(rg.ok());
+        INFO("symmetry " << sym);
+        CHECK(rg.fireflies == rf.fireflies);
+        for (std::size_t b = 0; b < f.color.size(); ++b) {
+            const std::vector<float> moved = t.apply(f.color[b], 3);
+            CHECK(std::memcmp(moved.data(), g.color[b].data(), moved.size() * sizeof(float)) == 0);
+            CHECK(t.apply(mf.mem[b], 1) == mg.mem[b]);
+        }
+    }
 }
 
 TEST_CASE("K buffers: 1e30 fireflies next to 1e-3 pixels stay finite", "[buffers][energy]") {

@@ -9,6 +9,7 @@
 
 #include "catch.hpp"
 #include "frame_views.hpp"
+#include "symmetry.hpp"
 
 using namespace firefly;
 
@@ -194,19 +195,7 @@ TEST_CASE("detect() and reconstruct = false change nothing and count nothing as 
 TEST_CASE("rebuilding from the other half is bit-identical under flips, transposes and threads", "[cross_half][invariant]") {
     const int w = 96, h = 96;
     const sim::frame base = sim::simulate(sim::named_scene("production", w, h, 17));
-    // the 8 symmetries of the square, as maps from output to input coordinates
-    auto map = [&](int s, int x, int y) {
-        int u = (s & 1) ? w - 1 - x : x, v = (s & 2) ? h - 1 - y : y;
-        if (s & 4) std::swap(u, v);
-        return static_cast<std::size_t>(v) * static_cast<std::size_t>(w) + static_cast<std::size_t>(u);
-    };
-    auto transform = [&](const std::vector<float>& in, int s) {
-        std::vector<float> out(in.size());
-        for (int y = 0; y < h; ++y)
-            for (int x = 0; x < w; ++x)
-                std::memcpy(&out[(static_cast<std::size_t>(y) * w + static_cast<std::size_t>(x)) * 3], &in[map(s, x, y) * 3], 12);
-        return out;
-    };
+    auto transform = [&](const std::vector<float>& in, int s) { return firefly_test::symmetry{s, w, h}.apply(in, 3); };
     auto run = [&](int s, executor e) {
         sim::frame f = base;
         for (int k = 0; k < 2; ++k) {

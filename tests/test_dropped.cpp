@@ -11,6 +11,7 @@
 
 #include "catch.hpp"
 #include "frame_views.hpp"
+#include "symmetry.hpp"
 
 using namespace firefly;
 using firefly_test::frame_views;
@@ -244,7 +245,7 @@ TEST_CASE("find_dropped keeps its promise on exchangeable buffers", "[dropped][c
             }
 }
 
-TEST_CASE("find_dropped: flips, transposes and executors give the same pixels", "[dropped]") {
+TEST_CASE("find_dropped: the 8 flips and transposes and executors give the same pixels", "[dropped]") {
     const int w = 70, h = 45;
     std::vector<std::uint8_t> lone = null_lone_map(w, h, 2, 0.3, 9u);
     for (int y = 5; y < 30; ++y)
@@ -260,23 +261,16 @@ TEST_CASE("find_dropped: flips, transposes and executors give the same pixels", 
     const std::vector<std::uint8_t> base = found_set(lone, w, h, executor{});
     CHECK(std::count(base.begin(), base.end(), 1) > 300);
     CHECK(found_set(lone, w, h, executor::threads(2)) == base);
-    std::vector<std::uint8_t> flipped(lone.size()), transposed(lone.size());
-    for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x) {
-            flipped[pixel(w - 1 - x, y, w)] = lone[pixel(x, y, w)];
-            transposed[pixel(y, x, h)] = lone[pixel(x, y, w)];
-        }
-    const std::vector<std::uint8_t> f = found_set(flipped, w, h, executor{}), t = found_set(transposed, h, w, executor{});
-    for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x) {
-            REQUIRE(f[pixel(w - 1 - x, y, w)] == base[pixel(x, y, w)]);
-            REQUIRE(t[pixel(y, x, h)] == base[pixel(x, y, w)]);
-        }
+    for (int sym = 1; sym < 8; ++sym) {
+        const firefly_test::symmetry t{sym, w, h};
+        INFO("symmetry " << sym);
+        CHECK(found_set(t.apply(lone, 1), t.width(), t.height(), executor{}) == t.apply(base, 1));
+    }
 }
 
 // The same with several buffers black at a pixel (K = 8: masks of 1 to 3 buffers, a block
 // black in two).
-TEST_CASE("find_dropped, several buffers black: flips, transposes and executors give the same pairs", "[dropped]") {
+TEST_CASE("find_dropped, several buffers black: the 8 flips and transposes and executors give the same pairs", "[dropped]") {
     const int w = 64, h = 41, k = 8;
     std::vector<std::uint64_t> black = null_black_map(w, h, k, 3, 0.25, 11u);
     for (int y = 4; y < 30; ++y)
@@ -292,18 +286,11 @@ TEST_CASE("find_dropped, several buffers black: flips, transposes and executors 
     const std::vector<std::uint64_t> base = found(black, w, h, executor{});
     CHECK(std::count(base.begin(), base.end(), std::uint64_t{0x24}) > 300);
     CHECK(found(black, w, h, executor::threads(2)) == base);
-    std::vector<std::uint64_t> flipped(black.size()), transposed(black.size());
-    for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x) {
-            flipped[pixel(x, h - 1 - y, w)] = black[pixel(x, y, w)];
-            transposed[pixel(y, x, h)] = black[pixel(x, y, w)];
-        }
-    const std::vector<std::uint64_t> f = found(flipped, w, h, executor{}), t = found(transposed, h, w, executor{});
-    for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x) {
-            REQUIRE(f[pixel(x, h - 1 - y, w)] == base[pixel(x, y, w)]);
-            REQUIRE(t[pixel(y, x, h)] == base[pixel(x, y, w)]);
-        }
+    for (int sym = 1; sym < 8; ++sym) {
+        const firefly_test::symmetry t{sym, w, h};
+        INFO("symmetry " << sym);
+        CHECK(found(t.apply(black, 1), t.width(), t.height(), executor{}) == t.apply(base, 1));
+    }
 }
 
 TEST_CASE("a bucket written black in half A is rebuilt from half B", "[dropped][pipeline]") {

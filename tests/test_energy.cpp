@@ -18,6 +18,7 @@
 
 #include "catch.hpp"
 #include "frame_views.hpp"
+#include "symmetry.hpp"
 
 using namespace firefly;
 
@@ -201,34 +202,17 @@ TEST_CASE("energy return: flipped and transposed frames give the same bits", "[e
         for (const int w : {37, 38, 23, 40}) {  // longer along x (x first), square (both orders)
             const int h = w == 40 ? 3 : 23;    // and a side shorter than the Gaussian's reach
             const energy_case e(w, h, 9);
-            // the 8 symmetries as maps from output (x, y) in a frame of size (W, H) to the input
             for (int sym = 1; sym < 8; ++sym) {
-                const bool tr = sym & 4;
-                const int W = tr ? h : w, H = tr ? w : h;
-                auto src = [&](int x, int y) {
-                    int u = x, v = y;
-                    if (tr) std::swap(u, v);
-                    if (sym & 1) u = w - 1 - u;
-                    if (sym & 2) v = h - 1 - v;
-                    return static_cast<std::size_t>(v * w + u) * 3;
-                };
-                std::vector<double> ex(e.excess.size()), sh(e.shape.size()), out, ref;
-                for (int y = 0; y < H; ++y)
-                    for (int x = 0; x < W; ++x)
-                        for (std::size_t c = 0; c < 3; ++c) {
-                            ex[static_cast<std::size_t>(y * W + x) * 3 + c] = e.excess[src(x, y) + c];
-                            sh[static_cast<std::size_t>(y * W + x) * 3 + c] = e.shape[src(x, y) + c];
-                        }
+                const firefly_test::symmetry t{sym, w, h};
+                std::vector<double> out, ref;
                 energy_scratch s;
                 energy_return(e.excess, e.shape, w, h, sigma, ref, s, executor{});
-                energy_return(ex, sh, W, H, sigma, out, s, executor::threads(2));
-                std::size_t differ = 0;
-                for (int y = 0; y < H; ++y)
-                    for (int x = 0; x < W; ++x)
-                        for (std::size_t c = 0; c < 3; ++c)
-                            differ += std::memcmp(&out[static_cast<std::size_t>(y * W + x) * 3 + c], &ref[src(x, y) + c], 8) != 0;
+                energy_return(t.apply(e.excess, 3), t.apply(e.shape, 3), t.width(), t.height(), sigma, out, s,
+                              executor::threads(2));
+                const std::vector<double> moved = t.apply(ref, 3);
                 INFO("sigma " << sigma.fine << " / " << sigma.coarse << ", w " << w << ", symmetry " << sym);
-                CHECK(differ == 0);
+                REQUIRE(out.size() == moved.size());
+                CHECK(std::memcmp(out.data(), moved.data(), out.size() * sizeof(double)) == 0);
             }
         }
 }

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "catch.hpp"
+#include "symmetry.hpp"
 
 using namespace firefly;
 
@@ -395,38 +396,21 @@ TEST_CASE("local test: double colour with float variance gives the float frame's
 
 namespace {
 
-// The frame seen through one of the 8 flips and transposes: pixel (x, y) of the result is
-// pixel map(x, y) of the source.
-struct transform {
-    bool flip_x, flip_y, swap;
-};
-
-test_frame apply(const test_frame& f, transform t, std::vector<std::uint32_t>& source_index) {
+// The frame seen through symmetry t; source_index[i]: the source pixel of pixel i.
+test_frame apply(const test_frame& f, const firefly_test::symmetry& t, std::vector<std::uint32_t>& source_index) {
     test_frame g;
-    g.w = t.swap ? f.h : f.w;
-    g.h = t.swap ? f.w : f.h;
-    const std::size_t n = static_cast<std::size_t>(f.w) * static_cast<std::size_t>(f.h);
-    source_index.assign(n, 0);
-    for (int h = 0; h < 2; ++h) {
-        g.color[h].assign(n * 3, 0.0f);
-        g.variance[h].assign(n * 3, 0.0f);
-    }
-    g.alpha.assign(n, 0.0f);
+    g.w = t.width();
+    g.h = t.height();
+    source_index.assign(static_cast<std::size_t>(f.w) * static_cast<std::size_t>(f.h), 0);
     for (int y = 0; y < g.h; ++y)
-        for (int x = 0; x < g.w; ++x) {
-            int sx = t.swap ? y : x, sy = t.swap ? x : y;
-            if (t.flip_x) sx = f.w - 1 - sx;
-            if (t.flip_y) sy = f.h - 1 - sy;
-            const std::size_t d = static_cast<std::size_t>(y) * static_cast<std::size_t>(g.w) + static_cast<std::size_t>(x);
-            const std::size_t src = static_cast<std::size_t>(sy) * static_cast<std::size_t>(f.w) + static_cast<std::size_t>(sx);
-            source_index[d] = static_cast<std::uint32_t>(src);
-            g.alpha[d] = f.alpha[src];
-            for (int h = 0; h < 2; ++h)
-                for (std::size_t c = 0; c < 3; ++c) {
-                    g.color[h][d * 3 + c] = f.color[h][src * 3 + c];
-                    g.variance[h][d * 3 + c] = f.variance[h][src * 3 + c];
-                }
-        }
+        for (int x = 0; x < g.w; ++x)
+            source_index[static_cast<std::size_t>(y) * static_cast<std::size_t>(g.w) + static_cast<std::size_t>(x)] =
+                static_cast<std::uint32_t>(t.source(x, y));
+    for (int h = 0; h < 2; ++h) {
+        g.color[h] = t.apply(f.color[h], 3);
+        g.variance[h] = t.apply(f.variance[h], 3);
+    }
+    g.alpha = t.apply(f.alpha, 1);
     return g;
 }
 
@@ -442,7 +426,7 @@ TEST_CASE("local test: the same flags under the 8 flips and transposes", "[local
     const local_test_result ref = run(f);
     REQUIRE(ref.half[0].index.size() + ref.half[1].index.size() > 10);
     for (int m = 1; m < 8; ++m) {
-        const transform t{(m & 1) != 0, (m & 2) != 0, (m & 4) != 0};
+        const firefly_test::symmetry t{m, f.w, f.h};
         std::vector<std::uint32_t> src;
         const test_frame g = apply(f, t, src);
         const local_test_result r = run(g);

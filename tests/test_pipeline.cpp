@@ -13,6 +13,7 @@
 
 #include "catch.hpp"
 #include "frame_views.hpp"
+#include "symmetry.hpp"
 
 using namespace firefly;
 
@@ -1075,35 +1076,6 @@ TEST_CASE("pipeline: a pixel on a line whose other half drew as low as the backg
     CHECK(rebuilt(where::no_line, 5.0f));
 }
 
-namespace {
-// The frame under symmetry sym (bit 0: flip x, bit 1: flip y, bit 2: transpose), as maps from
-// an output pixel of the (W, H) frame to the input's index.
-struct symmetry {
-    int sym, w, h;
-    bool transposed() const { return (sym & 4) != 0; }
-    int width() const { return transposed() ? h : w; }
-    int height() const { return transposed() ? w : h; }
-    std::size_t source(int x, int y) const {
-        int u = x, v = y;
-        if (transposed()) std::swap(u, v);
-        if (sym & 1) u = w - 1 - u;
-        if (sym & 2) v = h - 1 - v;
-        return static_cast<std::size_t>(v) * static_cast<std::size_t>(w) + static_cast<std::size_t>(u);
-    }
-    template <class T>
-    std::vector<T> apply(const std::vector<T>& in, int channels) const {
-        std::vector<T> out(in.size());
-        if (in.empty()) return out;  // (no alpha)
-        for (int y = 0; y < height(); ++y)
-            for (int x = 0; x < width(); ++x)
-                for (int c = 0; c < channels; ++c)
-                    out[(static_cast<std::size_t>(y) * static_cast<std::size_t>(width()) + static_cast<std::size_t>(x)) * channels + c] =
-                        in[source(x, y) * channels + c];
-        return out;
-    }
-};
-}  // namespace
-
 // The whole detector (detection, highlight rules, both rebuilds, the energy return) on frames
 // large enough that the variance calibration samples a lattice (above 4 x 16,384 pixels): it
 // was laid from one edge, so a flipped frame sampled other pixels (the Cycles caustics: factor
@@ -1127,7 +1099,7 @@ TEST_CASE("the detector: the 8 flips and transposes give the same bits on a larg
         const frame_report ref = run(ref_c, ref_v, ref_m, f.alpha, f.width, f.height);
         REQUIRE(ref.ok());
         for (int sym = 1; sym < 8; ++sym) {
-            const symmetry s{sym, f.width, f.height};
+            const firefly_test::symmetry s{sym, f.width, f.height};
             std::vector<float> c[2], v[2];
             std::vector<std::uint8_t> m[2];
             for (int i = 0; i < 2; ++i)

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "catch.hpp"
+#include "symmetry.hpp"
 
 using namespace firefly;
 
@@ -28,16 +29,6 @@ void fill(img& im, unsigned seed) {
         s = s * 1664525u + 1013904223u;
         v = static_cast<float>((s >> 8) & 0xffff) / 65536.0f + 0.1f;
     }
-}
-
-// Apply one of the 8 symmetries of the square to (x, y) in a w x w image.
-void sym(int k, int w, int x, int y, int& u, int& v) {
-    int a = x, b = y;
-    if (k & 4) std::swap(a, b);
-    if (k & 1) a = w - 1 - a;
-    if (k & 2) b = w - 1 - b;
-    u = a;
-    v = b;
 }
 }  // namespace
 
@@ -81,27 +72,15 @@ TEST_CASE("flips and transposes give bit-identical results", "[reconstruct][inva
     const reconstruct_report r0 = reconstruct(ref.view(), image_view<float>(), mask.data(), o, s);
     CHECK(r0.phase1_rounds >= 2);
     for (int k = 1; k < 8; ++k) {
+        const firefly_test::symmetry sym{k, w, w};
         img t(w, w, 3);
-        std::vector<std::uint8_t> tm(mask.size());
-        for (int y = 0; y < w; ++y)
-            for (int x = 0; x < w; ++x) {
-                int u, v;
-                sym(k, w, x, y, u, v);
-                for (int c = 0; c < 3; ++c) t.at(u, v, c) = base.at(x, y, c);
-                tm[static_cast<std::size_t>(v * w + u)] = mask[static_cast<std::size_t>(y * w + x)];
-            }
+        t.px = sym.apply(base.px, 3);
+        const std::vector<std::uint8_t> tm = sym.apply(mask, 1);
         const reconstruct_report r = reconstruct(t.view(), image_view<float>(), tm.data(), o, s);
         CHECK(r.phase1_rounds == r0.phase1_rounds);
         CHECK(r.phase2_iterations == r0.phase2_iterations);
-        bool same = true;
-        for (int y = 0; y < w; ++y)
-            for (int x = 0; x < w; ++x) {
-                int u, v;
-                sym(k, w, x, y, u, v);
-                for (int c = 0; c < 3; ++c) same &= (t.at(u, v, c) == ref.at(x, y, c));
-            }
         INFO("symmetry " << k);
-        CHECK(same);
+        CHECK(t.px == sym.apply(ref.px, 3));
     }
 }
 
