@@ -35,8 +35,12 @@
 //   neighbourhood's level (the median of its pixels' mean y): where light is sparse (a dark
 //   room at a few samples a buffer) half the buffers catch no path, and a black R says only
 //   that (before: any buffer above a black R was flagged; a Cycles exterior's doorway at 4
-//   samples a buffer, K = 8, came out black, relMSE 0.0203 -> 0.0286, now 0.0182). A buffer
-//   above a black R in a black neighbourhood (a firefly on a black background) is flagged.
+//   samples a buffer, K = 8, came out black, relMSE 0.0203 -> 0.0286, now 0.0182). Black
+//   includes a hair below 0 (-1e-20). Where most neighbours are black too, a buffer above a
+//   black R is flagged only if the light is absent rather than sparse: no two lit pixels among
+//   the 80 around in 9 x 9 (a firefly on a black background, also with no neighbour at all);
+//   where light is that sparse, a lit buffer above black ones is what it looks like (before,
+//   with 95% of the buffers black, K = 4 at one sample a buffer lost 93% of its light).
 // Promise, per frame (fdr.hpp): a frame without fireflies gets no flag at all in at least
 // 1 - alpha of cases (the generalized ESD's promise), and with fireflies at most alpha of the
 // flagged pixels are expected clean. Each pixel's p-value is the smallest over its steps of
@@ -107,8 +111,9 @@
 // K >= 4 with use_variance off).
 //
 // Deterministic and independent of the order of the buffers: the per-pixel statistics are
-// taken in the order of the sorted levels (ties by colour), so a permutation of the buffers
-// permutes the output, bit for bit.
+// taken in the order of the sorted levels (ties by colour), and buffers of equal level are
+// flagged together or not at all, so a permutation of the buffers permutes the output, bit
+// for bit.
 #pragma once
 
 #include <algorithm>
@@ -216,6 +221,7 @@ struct pixel_buffers {
     std::uint64_t implausible = 0;  // bit i: buffer i's value implausible (implausible.hpp)
     double around = std::numeric_limits<double>::quiet_NaN();  // the neighbourhood's level, where
                                                                // some buffer is black (NaN: unknown)
+    bool lit_around = false;  // where `around` is 0: light sparse there, not absent (set_around)
     // y of the j-th highest usable buffer
     double ranked_y(int j) const noexcept { return y[static_cast<std::size_t>(order[static_cast<std::size_t>(j)])]; }
 };
@@ -321,7 +327,7 @@ inline double pixel_noise(const pixel_buffers& p, bool with_variance, int from =
 
 // Step i of the step-down: the i-th highest buffer against the mean of the ones below it, in
 // noise standard deviations (noise: the pooled relative variance of y). NaN when it does not
-// stand above them; +infinity when they agree exactly at 0 (no noise: any excess stands out).
+// stand above them; +infinity when they are black at level 0 (no noise: any excess stands out).
 // Where light is sparse (a dark room at a few samples a buffer) many buffers catch no path at
 // all, and R's mean, black or nearly, says little of the pixel's level: where some buffer is
 // black the candidate is never judged below the neighbourhood's level (p.around,
@@ -334,8 +340,11 @@ inline double step_statistic(const pixel_buffers& p, int i, double noise, bool w
     if (!(yc > mean)) return std::numeric_limits<double>::quiet_NaN();
     const double level = p.around > mean ? p.around : mean;
     if (level == 0) {
-        for (int j = i; j < p.usable; ++j)
-            if (p.ranked_y(j) != 0) return std::numeric_limits<double>::quiet_NaN();
+        // Most neighbours black but light around: sparse light, where a lit buffer above black
+        // ones is what the light looks like (a firefly there cannot be told from it by level).
+        if (p.lit_around) return std::numeric_limits<double>::quiet_NaN();
+        for (int j = i; j < p.usable; ++j)  // R black (or below, as -1e-20 is): nothing to stand out of
+            if (p.ranked_y(j) > 0) return std::numeric_limits<double>::quiet_NaN();
         return HUGE_VAL;
     }
     if (!(yc > level)) return std::numeric_limits<double>::quiet_NaN();
@@ -349,19 +358,28 @@ inline double step_statistic(const pixel_buffers& p, int i, double noise, bool w
     return s > 0 ? (yc - level) / s : HUGE_VAL;
 }
 
+// Whether some usable buffer of p is black, or below (its lowest y <= 0): then the candidate is
+// judged at the neighbourhood's level too (set_around, step_statistic).
+inline bool black_below(const pixel_buffers& p) noexcept {
+    return p.usable > 0 && p.ranked_y(p.usable - 1) <= 0;
+}
+
 // The steps a pixel can take: at most floor(K / 2) buffers flagged, and one must stay clean.
 inline int step_limit(const pixel_buffers& p) noexcept {
     return std::min(p.k / 2 - (p.k - p.usable), p.usable - 1);
 }
 
 // Rosner-style step-down of one pixel: the largest i whose step statistic exceeds step[i]
-// flags the top i (a second firefly above the tested one cannot mask it). Returns the number
-// flagged (p.flagged set).
+// flags the top i (a second firefly above the tested one cannot mask it), but never splits
+// buffers of equal y (a renderer's clamp, or bit-identical buffers): a buffer equal to one left
+// clean is clean, so the output does not depend on the order of the buffers. Returns the
+// number flagged (p.flagged set).
 inline int judge_pixel(pixel_buffers& p, double noise, bool with_variance, const cross_thresholds& th) noexcept {
     if (!(noise >= 0)) return 0;
     for (int i = step_limit(p); i >= 1; --i) {
         const double t = step_statistic(p, i, noise, with_variance);
         if (t > th.step[static_cast<std::size_t>(i)]) {
+            while (i > 0 && p.ranked_y(i - 1) == p.ranked_y(i)) --i;  // (i < usable: one stays clean)
             for (int j = 0; j < i; ++j) p.flagged[static_cast<std::size_t>(p.order[static_cast<std::size_t>(j)])] = true;
             return i;
         }
@@ -375,6 +393,9 @@ inline int judge_pixel(pixel_buffers& p, double noise, bool with_variance, const
 // so where each bound is at most the step's smallest threshold over the pool sizes (lowest[i]),
 // no step can pass. NaN (the candidate not above the rest) passes no step either.
 inline bool cannot_flag(const pixel_buffers& p, bool with_variance, const std::array<double, max_buffers / 2 + 1>& lowest) noexcept {
+    // A lit buffer above black ones is judged with its neighbourhood's level, which the bound
+    // does not know (R's mean may be exactly 0 with buffers of both signs, its statistic NaN)
+    if (black_below(p) && p.ranked_y(0) > 0) return false;
     for (int i = step_limit(p); i >= 1; --i) {
         const double t = step_statistic(p, i, 0.0, with_variance);
         if (t > lowest[static_cast<std::size_t>(i)]) return false;
@@ -702,6 +723,7 @@ private:
             if ((p.implausible >> i) & 1u) p.finite[static_cast<std::size_t>(i)] = false, p.flagged[static_cast<std::size_t>(i)] = true;
         sort_buffers(b, x, y, p);
         p.around = std::numeric_limits<double>::quiet_NaN();  // set where needed (set_around)
+        p.lit_around = false;
     }
 
     // The buffers found dropped at (x, y): bit i for buffer i (0: none).
@@ -838,11 +860,15 @@ private:
         return {median_noise(near.data(), joined, k, with_var), joined};
     }
 
-    // p.around where some buffer of (x, y) is black (step_statistic): the median over the window
-    // of the neighbours' mean y (their fireflies raise a mean; the median of the window does not
-    // follow one). NaN without a neighbour.
+    // p.around where some buffer of (x, y) is black, or below (a buffer at -1e-20 is black too:
+    // step_statistic): the median over the window of the neighbours' mean y (their fireflies
+    // raise a mean; the median of the window does not follow one); NaN without a neighbour.
+    // Where that is black, p.lit_around says whether the light is sparse rather than absent: at
+    // least two lit pixels among the 80 around in 9 x 9 (a lone firefly on a black background
+    // has none; light with 2% of its samples lit, 4 buffers of one sample, leaves 1.5% of its
+    // lit pixels without two such neighbours, and 52% without one in 3 x 3).
     void set_around(detail::pixel_buffers& p, int x, int y, int w, int h) const {
-        if (p.usable == 0 || p.ranked_y(p.usable - 1) != 0) return;
+        if (!detail::black_below(p)) return;
         std::array<double, 17 * 17> v;
         int n = 0;
         const int r = options_.radius;
@@ -852,15 +878,27 @@ private:
                 if ((i != x || j != y) && m == m) v[static_cast<std::size_t>(n++)] = m;
             }
         if (n > 0) p.around = detail::median_of(v.data(), n);
+        if (!(p.around > 0)) p.lit_around = lit_neighbours(x, y, w, h, 4, 2) >= 2;
     }
 
-    // The noise p is judged with (and p.around set). Where no pixel of the window has a known
-    // noise and the neighbourhood is black (a firefly on a black background, its own noise
-    // refined to that of its black buffers), there is none: any excess stands out.
+    // The lit pixels (mean y > 0) of the (2 r + 1)^2 window around (x, y), itself left out,
+    // counted up to `enough`.
+    int lit_neighbours(int x, int y, int w, int h, int r, int enough) const {
+        int lit = 0;
+        for (int j = std::max(0, y - r); j <= std::min(h - 1, y + r) && lit < enough; ++j)
+            for (int i = std::max(0, x - r); i <= std::min(w - 1, x + r); ++i)
+                lit += (i != x || j != y) && mean_level_[index(i, j, w)] > 0;
+        return lit;
+    }
+
+    // The noise p is judged with (and p.around set). Where some buffer is black, no pixel of the
+    // window has a known noise and no neighbour is lit (a firefly on a black background, its own
+    // noise refined to that of its black buffers; or no neighbour at all: radius 0, a 1x1
+    // frame), there is none: any excess stands out.
     pooled judging_noise(detail::pixel_buffers& p, int x, int y, int w, int h, int k, bool with_var) const {
         set_around(p, x, y, w, h);
         const pooled pn = pooled_noise(x, y, w, h, k, with_var, own_rest(p, with_var));
-        return pn.n == 0 && p.around == 0 ? pooled{0.0, 1} : pn;
+        return pn.n == 0 && detail::black_below(p) && !(p.around > 0) && !p.lit_around ? pooled{0.0, 1} : pn;
     }
 
     // Pass 2: every pixel judged at the cap level (false_alarm); those flagged, with their
