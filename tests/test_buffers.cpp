@@ -747,10 +747,7 @@ TEST_CASE("K buffers: sparse light with black buffers is noise, a firefly in it 
 
 TEST_CASE("K buffers: a firefly on a black background is removed", "[buffers]") {
     for (const int k : {3, 4, 8}) {
-        frame_k f;
-        f.w = 16;
-        f.h = 12;
-        for (int b = 0; b < k; ++b) f.color.emplace_back(16 * 12 * 3, 0.0f), f.variance.emplace_back(16 * 12 * 3, 0.0f);
+        frame_k f = constant_frame(k, 16, 12, 0.0f);
         for (int c = 0; c < 3; ++c) f.color[static_cast<std::size_t>(k - 1)][(6 * 16 + 8) * 3 + static_cast<std::size_t>(c)] = 50.0f;
         masks_k mk(k, 16, 12);
         const cross_buffer_report r = clean_without_return(f, mk);
@@ -773,16 +770,15 @@ TEST_CASE("K buffers: very sparse light is kept where most neighbours are black"
     for (const regime g : {regime{4, 1, 0.05}, regime{4, 1, 0.02}, regime{8, 1, 0.05}, regime{8, 4, 0.02}})
         for (const bool energy : {false, true}) {
             frame_k f = sparse_frame(g.k, 64, 48, g.n, g.hit, 7);
-            double light_in = 0, light_out = 0;
+            const double light_in = region_mean(f, 0, 0, 64, 48);
             std::size_t black = 0;
             for (const auto& b : f.color)
-                for (std::size_t i = 0; i < b.size(); i += 3) light_in += b[i], black += b[i] == 0;
+                for (std::size_t i = 0; i < b.size(); i += 3) black += b[i] == 0;
             cross_buffer_options o;
             o.return_energy = energy;
             cross_buffer_detector d(o);
             REQUIRE(d.process(f.views(false)).ok());
-            for (const auto& b : f.color)
-                for (std::size_t i = 0; i < b.size(); i += 3) light_out += b[i];
+            const double light_out = region_mean(f, 0, 0, 64, 48);
             INFO("k " << g.k << ", n " << g.n << ", hit " << g.hit << ", return " << energy << ": " << black << " of "
                       << 64 * 48 * g.k << " pixel-buffers black; light " << light_in << " -> " << light_out);
             CHECK(static_cast<double>(black) > 0.8 * 64 * 48 * g.k);
@@ -796,10 +792,8 @@ TEST_CASE("K buffers: very sparse light is kept where most neighbours are black"
 TEST_CASE("K buffers: a firefly on black is removed without neighbours too", "[buffers]") {
     for (const int k : {3, 4, 8})
         for (const int side : {1, 16}) {
-            frame_k f;
-            f.w = f.h = side;
-            const std::size_t n = static_cast<std::size_t>(side * side * 3), at = static_cast<std::size_t>((side / 2) * side + side / 2) * 3;
-            for (int b = 0; b < k; ++b) f.color.emplace_back(n, 0.0f), f.variance.emplace_back(n, 0.0f);
+            frame_k f = constant_frame(k, side, side, 0.0f);
+            const std::size_t at = static_cast<std::size_t>((side / 2) * side + side / 2) * 3;
             for (int c = 0; c < 3; ++c) f.color[static_cast<std::size_t>(k - 1)][at + static_cast<std::size_t>(c)] = 50.0f;
             cross_buffer_options o;
             o.return_energy = false;
@@ -820,9 +814,7 @@ TEST_CASE("K buffers: a firefly on black is removed without neighbours too", "[b
 TEST_CASE("K buffers: a buffer just below 0 is black for the sparse-light rule", "[buffers]") {
     for (const float low : {0.0f, -1e-20f, -1e-7f, 1e-7f}) {
         const int k = 8;
-        frame_k f;
-        f.w = f.h = 5;
-        for (int b = 0; b < k; ++b) f.color.emplace_back(75, 0.0f), f.variance.emplace_back(75, 0.0f);
+        frame_k f = constant_frame(k, 5, 5, 0.0f);
         auto set = [&](int b, int x, int y, float v) {
             for (int c = 0; c < 3; ++c) f.color[static_cast<std::size_t>(b)][static_cast<std::size_t>((y * 5 + x) * 3 + c)] = v;
         };
@@ -855,17 +847,13 @@ TEST_CASE("K buffers: buffers of equal level are never split", "[buffers]") {
         for (int t = 0; t < 300; ++t) {
             const int ties = 2 + static_cast<int>(rng.uniform() * (k / 2 - 1));
             const double shape = 4 + 60 * rng.uniform(), top = 1 + 3 * rng.uniform();
-            frame_k f;
-            f.w = f.h = 5;
-            for (int b = 0; b < k; ++b) {
-                f.color.emplace_back(75, 0.0f), f.variance.emplace_back(75, 0.0f);
-                for (int i = 0; i < 25; ++i) {
+            frame_k f = constant_frame(k, 5, 5, 0.0f);
+            for (std::size_t b = 0; b < static_cast<std::size_t>(k); ++b)
+                for (std::size_t i = 0; i < 25 * 3; i += 3) {
                     const float v = static_cast<float>(rng.gamma(shape) / shape);
-                    for (int c = 0; c < 3; ++c) f.color.back()[static_cast<std::size_t>(i * 3 + c)] = v;
-                    f.variance.back()[static_cast<std::size_t>(i * 3)] = v * v / static_cast<float>(shape);
-                    f.variance.back()[static_cast<std::size_t>(i * 3 + 1)] = f.variance.back()[static_cast<std::size_t>(i * 3 + 2)] = f.variance.back()[static_cast<std::size_t>(i * 3)];
+                    for (std::size_t c = 0; c < 3; ++c)
+                        f.color[b][i + c] = v, f.variance[b][i + c] = v * v / static_cast<float>(shape);
                 }
-            }
             for (int b = 0; b < ties; ++b)
                 for (int c = 0; c < 3; ++c) f.color[static_cast<std::size_t>(b)][static_cast<std::size_t>(12 * 3 + c)] = static_cast<float>(top);
             cross_buffer_options o;

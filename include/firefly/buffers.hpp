@@ -871,23 +871,18 @@ private:
         if (!detail::black_below(p)) return;
         std::array<double, 17 * 17> v;
         int n = 0;
-        const int r = options_.radius;
-        for (int j = std::max(0, y - r); j <= std::min(h - 1, y + r); ++j)
-            for (int i = std::max(0, x - r); i <= std::min(w - 1, x + r); ++i) {
-                const float m = mean_level_[index(i, j, w)];
-                if ((i != x || j != y) && m == m) v[static_cast<std::size_t>(n++)] = m;
-            }
+        detail::for_each_neighbour(w, h, x, y, options_.radius, [&](std::size_t q) {
+            const float m = mean_level_[q];
+            if (m == m) v[static_cast<std::size_t>(n++)] = m;
+        });
         if (n > 0) p.around = detail::median_of(v.data(), n);
-        if (!(p.around > 0)) p.lit_around = lit_neighbours(x, y, w, h, 4, 2) >= 2;
+        if (!(p.around > 0)) p.lit_around = lit_pixels_around(x, y, w, h) >= 2;
     }
 
-    // The lit pixels (mean y > 0) of the (2 r + 1)^2 window around (x, y), itself left out,
-    // counted up to `enough`.
-    int lit_neighbours(int x, int y, int w, int h, int r, int enough) const {
+    // The lit pixels (mean y > 0) among the 80 around (x, y) in 9 x 9.
+    int lit_pixels_around(int x, int y, int w, int h) const {
         int lit = 0;
-        for (int j = std::max(0, y - r); j <= std::min(h - 1, y + r) && lit < enough; ++j)
-            for (int i = std::max(0, x - r); i <= std::min(w - 1, x + r); ++i)
-                lit += (i != x || j != y) && mean_level_[index(i, j, w)] > 0;
+        detail::for_each_neighbour(w, h, x, y, 4, [&](std::size_t q) { lit += mean_level_[q] > 0; });
         return lit;
     }
 
