@@ -59,9 +59,13 @@ def aim(obj, target):
     obj.rotation_euler = d.to_track_quat('-Z', 'Y').to_euler()
 
 
-def camera(scene, location, target, lens):
+def camera(scene, location, target, lens, focus=None, fstop=None):
+    """focus (metres) and fstop, when given, turn on depth of field (a thin lens)."""
     bpy.ops.object.camera_add(location=location)
     cam = bpy.context.object
     cam.data.lens = lens
+    if focus is not None:
+        cam.data.dof.use_dof = True
+        cam.data.dof.focus_distance, cam.data.dof.aperture_fstop = focus, fstop
     aim(cam, target)
     scene.camera = cam

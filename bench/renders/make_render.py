@@ -4,7 +4,7 @@ split into two halves with variance by halves.py), or one reference render.
     blender -b -P bench/renders/make_render.py -- SCENE seeds FIRST N OUT_DIR
     blender -b -P bench/renders/make_render.py -- SCENE reference SPP OUT_DIR
 
-SCENE is a module here (fog, exterior) whose build(scene) makes the scene and returns the
+SCENE is a module here (fog, exterior, bokeh) whose build(scene) makes the scene and returns the
 camera. Seeds give OUT_DIR/seed_<i>.exr; the reference (seed 100000, SPP samples)
 OUT_DIR/reference.exr. 400x300, two threads.
 """
