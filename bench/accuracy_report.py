@@ -99,7 +99,7 @@ def shown(scene_rows):
     """Per-scene rows: firefly, the paper, the input, the peers, and the K-buffer estimators
     when the scene has more than two buffers (on the halves they equal the input)."""
     k2 = any(r["method"].startswith("mean_k2") for r in scene_rows)
-    keep = [r for r in scene_rows if r["method"] in ("firefly", "firefly_no_energy", "firefly_fine_energy", "firefly_paper", "input") + PEERS
+    keep = [r for r in scene_rows if r["method"] in ("firefly", "firefly_no_energy", "firefly_fine_energy", "firefly_no_density", "firefly_paper", "input") + PEERS
             or (is_kbuf(r["method"]) and not k2)]
     return sorted(keep, key=lambda r: r["relmse"])
 

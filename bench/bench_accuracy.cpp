@@ -114,6 +114,7 @@ void add_firefly_configs(std::vector<config>& c) {
     with("firefly_no_local_test", [](detector_options& o) { o.local_test = false; }, true);
     with("firefly_no_energy", [](detector_options& o) { o.return_energy = false; }, true);
     with("firefly_fine_energy", [](detector_options& o) { o.energy_coarse_sigma = 0; }, true);  // one scale
+    with("firefly_no_density", [](detector_options& o) { o.energy_density_evidence = 0; }, true);  // density.hpp
     with("firefly_alpha0.01", [](detector_options& o) { o.alpha = 0.01; });
     with("firefly_alpha0.2", [](detector_options& o) { o.alpha = 0.2; });
     with("firefly_bound3.0", [](detector_options& o) { o.bound_threshold = 3.0; });

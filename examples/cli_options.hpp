@@ -257,6 +257,12 @@ inline void add_detector_options(CLI::App& app, options& c) {
         ->type_name("X")
         ->check(number_in(0, 0, false, false, "0") | number_in(2, 256, false, false, "a number from 2 to 256"))
         ->group("detector (every mode)");
+    app.add_option("--energy-density-evidence", o.energy_density_evidence,
+                   "the energy return's finest scale: removed light given back where it fell, where more "
+                   "than X equal removed samples of both halves agree (a bokeh disc lit by rare samples; 0: none)")
+        ->type_name("X")
+        ->check(number_in(0, 0, false, false, "0") | number_in(1, 1e6, false, false, "a number from 1 to 1e6"))
+        ->group(g);
     app.add_option("--bound", o.bound_threshold, "modified Z-score threshold")->type_name("X")->check(number_in(0, 1e30, false, false, "a number >= 0"))->group(g);
     add_choice(app, "--reduction", o.reduction,
                std::map<std::string, firefly::variance_reduction>{{"mean", firefly::variance_reduction::mean},

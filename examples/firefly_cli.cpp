@@ -649,6 +649,7 @@ json options_json(const options& c) {
                   {"find_implausible", o.find_implausible},
                   {"energy_sigma", o.energy_sigma},
                   {"energy_coarse_sigma", o.energy_coarse_sigma},
+                  {"energy_density_evidence", o.energy_density_evidence},
                   {"threads", c.threads}});
     return j;
 }

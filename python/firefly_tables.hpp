@@ -107,6 +107,7 @@ constexpr void for_each_option(F&& f) {
     f("return_energy", [](O& o) -> auto& { return o.return_energy; });
     f("energy_sigma", [](O& o) -> auto& { return o.energy_sigma; });
     f("energy_coarse_sigma", [](O& o) -> auto& { return o.energy_coarse_sigma; });
+    f("energy_density_evidence", [](O& o) -> auto& { return o.energy_density_evidence; });
     f("local_test", [](O& o) -> auto& { return o.local_test; });
     f("local_false_alarm", [](O& o) -> auto& { return o.local.false_alarm; });
     f("local_radius", [](O& o) -> auto& { return o.local.radius; });

@@ -355,7 +355,7 @@ TEST_CASE("two halves, return_energy: nothing added to an outlier kept within it
         CHECK(beside_lit == 0);
         all_beside += beside;
     }
-    CHECK(all_beside > 40);
+    CHECK(all_beside > 30);  // enough cases seen (36 since the density scale lifts the medians)
 }
 
 // A pair kept as a highlight that stands above a smooth neighbourhood holds its rise above it

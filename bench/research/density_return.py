@@ -1,14 +1,16 @@
 #!/usr/bin/python3
 """A finer scale for the energy return, measured outside the library: the removed light given
-back where it fell, as a Gaussian density of the removed excess itself.
+back where it fell, as a Gaussian density of the removed excess itself. The prototype of
+include/firefly/density.hpp (which pools the evidence over both halves, as --pooled rows do
+here, and keeps only the part above the cleaned image's level).
 
     /usr/bin/python3 bench/research/density_return.py RENDER_DIR [--cli PATH] [--sigma 2]
         [--evidence 4 8] [--out DIR]
 
 RENDER_DIR holds half_a.exr, half_b.exr and reference.exr (or reference.pfm), as
 bench/renders/halves.py writes them or ../shared/data holds them. The firefly tool (`--cli`,
-default build/tests/examples/firefly) cleans the halves twice, with the defaults and with
---no-energy-return; the difference of the input and the second is each half's removed excess
+default build/tests/examples/firefly) cleans the halves twice, with the defaults but the
+finest scale (--energy-density-evidence 0) and with --no-energy-return; the difference of the input and the second is each half's removed excess
 e, per pixel and channel. Then, per half,
     M = G_sigma * e,  V = G_sigma^2 * |e|^2,  s = max(0, 1 - c V / |M|^2)
 (the energy return's James-Stein factor, energy.hpp, with c the evidence asked: the return
@@ -81,7 +83,7 @@ def main():
     ref = read_rgb(ref_path)
     half = [read_rgb(os.path.join(src, f)) for f in ("half_a.exr", "half_b.exr")]
     with tempfile.TemporaryDirectory() as tmp:
-        default = clean(a.cli, src, os.path.join(tmp, "default"))
+        default = clean(a.cli, src, os.path.join(tmp, "default"), "--energy-density-evidence", "0")
         removed_only = clean(a.cli, src, os.path.join(tmp, "removed"), "--no-energy-return")
     lum = ref.mean(-1)
     regions = (lum > 1, (lum > 0.2) & (lum <= 1), lum <= 0.2)
@@ -94,16 +96,22 @@ def main():
     print("%-16s relMSE    bright / middle / dark   light" % "method")
     report("input", (half[0] + half[1]) / 2)
     report("removed only", (removed_only[0] + removed_only[1]) / 2)
-    report("defaults", (default[0] + default[1]) / 2)
+    report("wider scales", (default[0] + default[1]) / 2)
     k = gaussian(a.sigma)
-    for c in a.evidence:
-        out = []
-        for h in range(2):
-            e = np.maximum(half[h] - removed_only[h], 0.0)
-            fine, s = density(e, k, c)
-            out.append(removed_only[h] + fine + (default[h] - removed_only[h]) * (1.0 - s[..., None]))
-        x = (out[0] + out[1]) / 2
-        report("density c=%g" % c, x)
+    excess = [np.maximum(half[h] - removed_only[h], 0.0) for h in range(2)]
+    for pooled in (False, True):
+        for c in a.evidence:
+            out = []
+            if pooled:
+                _, s = density(excess[0] + excess[1], k, c)
+            for h in range(2):
+                fine, own = density(excess[h], k, c)
+                if pooled:
+                    m = np.stack([convolve(excess[h][..., ch], k, mode="constant") for ch in range(3)], -1)
+                    fine, own = s[..., None] * m, s
+                out.append(removed_only[h] + fine + (default[h] - removed_only[h]) * (1.0 - own[..., None]))
+            x = (out[0] + out[1]) / 2
+            report("%s c=%g" % ("pooled" if pooled else "per half", c), x)
         if a.out:
             d = os.path.join(a.out, os.path.basename(os.path.normpath(src)))
             os.makedirs(d, exist_ok=True)

@@ -35,6 +35,7 @@
 #include "bound.hpp"
 #include "cross_half.hpp"
 #include "dropped.hpp"
+#include "density.hpp"
 #include "energy.hpp"
 #include "esd.hpp"
 #include "fdr.hpp"
@@ -100,6 +101,11 @@ struct detector_options {
     double energy_coarse_sigma = 32.0;  // the wider scale, used where the fine one cannot tell
                                         // them apart (sparse fireflies); 0 or not above
                                         // energy_sigma: none; else 2 to 256
+    double energy_density_evidence = 8.0;  // the return's finest scale (density.hpp): removed
+                                        // light given back where it fell, above the cleaned
+                                        // image's level, where more than this many equal removed
+                                        // samples of both halves agree (a bokeh disc, dense
+                                        // fireflies); 0: none; else 1 to 1e6
 };
 
 inline status check_options(const detector_options& o) noexcept {
@@ -120,6 +126,8 @@ inline status check_options(const detector_options& o) noexcept {
     if (!(o.energy_sigma >= 1.0 && o.energy_sigma <= 64.0))
         return status{errc::invalid_argument, "energy_sigma must lie in [1, 64]"};
     if (status st = check_energy_coarse(o.energy_coarse_sigma); !st.ok()) return st;
+    if (!(o.energy_density_evidence == 0.0 || (o.energy_density_evidence >= 1.0 && o.energy_density_evidence <= 1e6)))
+        return status{errc::invalid_argument, "energy_density_evidence must be 0 or lie in [1, 1e6]"};
     return check_reconstruct_options(o.reconstruction);
 }
 
@@ -254,7 +262,7 @@ public:
                  h.band_counts.capacity() * sizeof(stddev_counts) + h.before.capacity() * sizeof(float) + h.added.capacity() +
                  h.held.capacity() * sizeof(std::uint32_t) + h.held_values.capacity() * sizeof(float) + h.held_shares.capacity() +
                  h.recon.bytes();
-        return n + energy_.bytes();
+        return n + energy_.bytes() + density_.bytes() + density_light_.capacity() * sizeof(density_return::light);
     }
 
     // Cleans both halves in place and reports. mask_a / mask_b (optional, 1 channel, the
@@ -394,8 +402,13 @@ private:
             for (std::size_t j = 0; j < pairs_.size(); ++j)
                 if (pair_base_[j] > 0) risen_.emplace_back(pairs_[j], pair_base_[j]);
             std::sort(risen_.begin(), risen_.end());
-            for (int h = 0; h < 2; ++h)
+            energy_totals density[2];
+            give_density_back(hb, masks, density);
+            for (int h = 0; h < 2; ++h) {
                 give_energy_back(*hb[h], *hb[1 - h], halves_[h], halves_[1 - h], *masks[h], rep.half[h]);
+                rep.half[h].energy_removed += density[h].removed;
+                rep.half[h].energy_returned += density[h].returned;
+            }
         }
         clock.lap(frame_report::rebuild);
         for (const half_report& hr : rep.half)
@@ -1244,6 +1257,107 @@ private:
         s.cross_values.resize(s.cross.size() * stride);
     }
 
+    // return_energy, its finest scale (density.hpp): both halves' removed excess pooled, the
+    // density's light added to each half, and each rebuilt pixel's `before` lowered by the
+    // share the density gave back (the wider scales return the rest). A pixel where either
+    // half kept an outlier holds its light already and gets none; a rebuilt pixel at most f e.
+    template <class C, class V, class A>
+    void give_density_back(const half_buffer<C, V, A>* hb[2], const image_view<std::uint8_t>* masks[2],
+                           energy_totals (&totals)[2]) {
+        if constexpr (!std::is_const_v<C>) {
+            const int w = hb[0]->color.width(), h = hb[0]->color.height();
+            if (!(options_.energy_density_evidence > 0) || hb[0]->color.channels() < 3) return;
+            density_return d;
+            d.prepare(w, h, density_);
+            float ex[3];
+            for (int k = 0; k < 2; ++k)
+                for (std::size_t e = 0; e < halves_[k].fix.size(); ++e)
+                    if (rebuilt_excess(*hb[k], halves_[k], e, ex)) density_.removed[halves_[k].fix[e]] = 1;
+            if (!d.needed(options_.energy_density_evidence, density_)) return;
+            for (int k = 0; k < 2; ++k)
+                for (std::size_t e = 0; e < halves_[k].fix.size(); ++e)
+                    if (rebuilt_excess(*hb[k], halves_[k], e, ex))
+                        std::copy_n(ex, 3, &density_.excess[k][static_cast<std::size_t>(halves_[k].fix[e]) * 3]);
+            for (int y = 0; y < h; ++y)  // the cleaned halves' level, positive finite parts
+                for (int x = 0; x < w; ++x)
+                    for (int c = 0; c < 3; ++c) {
+                        double l = 0;
+                        for (int k = 0; k < 2; ++k) {
+                            const double v = hb[k]->color.load(x, y, c);
+                            l += std::isfinite(v) && v > 0 ? v : 0.0;
+                        }
+                        density_.level[(static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)) * 3 +
+                                       static_cast<std::size_t>(c)] = static_cast<float>(std::min(l, static_cast<double>(FLT_MAX)));
+                    }
+            if (!d.run(options_.energy_density_evidence, density_, density_light_, exec_)) return;
+            for (int k = 0; k < 2; ++k) add_density_light(*hb[k], halves_[k], halves_[1 - k], d, k, *masks[k], totals[k]);
+        } else {
+            (void)hb, (void)masks, (void)totals;
+        }
+    }
+
+    // What the rebuild took from entry e of the half's list: before less the cleaned value,
+    // where finite and positive (as energy.hpp maps it); false where nothing.
+    template <class C, class V, class A>
+    static bool rebuilt_excess(const half_buffer<C, V, A>& hb, const half_state& s, std::size_t e, float* ex) {
+        const int w = hb.color.width();
+        const int x = static_cast<int>(s.fix[e] % static_cast<std::uint32_t>(w)), y = static_cast<int>(s.fix[e] / static_cast<std::uint32_t>(w));
+        bool any = false;
+        for (int c = 0; c < 3; ++c) {
+            const double v = static_cast<double>(s.before[e * 3 + static_cast<std::size_t>(c)]) - hb.color.load(x, y, c);
+            ex[c] = std::isfinite(v) && v > 0 ? static_cast<float>(std::min(v, static_cast<double>(FLT_MAX))) : 0.0f;
+            if (ex[c] > v) ex[c] = std::nextafter(ex[c], 0.0f);
+            any = any || ex[c] > 0;
+        }
+        return any;
+    }
+
+    // One half's density light (density_light_, half k), then its list's `before` lowered by
+    // the share given: the wider scales see the rest of each rebuilt pixel's excess.
+    template <class C, class V, class A>
+    void add_density_light(const half_buffer<C, V, A>& hb, half_state& s, const half_state& o, const density_return& d,
+                           int k, const image_view<std::uint8_t>& mask, energy_totals& t) {
+        const int w = hb.color.width();
+        constexpr std::uint8_t kept = highlight_bit | consistent_bit;
+        std::vector<float> excess(s.fix.size() * 3, 0.0f);
+        for (std::size_t e = 0; e < s.fix.size(); ++e) rebuilt_excess(hb, s, e, &excess[e * 3]);
+        std::size_t e = 0;  // the list's entry at or after the pixel
+        for (const density_return::light& l : density_light_) {
+            const std::uint32_t i = l.pixel;
+            while (e < s.fix.size() && s.fix[e] < i) ++e;
+            if (cls(s.label[i]) != valid_class || (s.label[i] & kept) || (o.label[i] & kept)) continue;
+            const int x = static_cast<int>(i % static_cast<std::uint32_t>(w)), y = static_cast<int>(i / static_cast<std::uint32_t>(w));
+            double add[3], old[3];
+            const bool rebuilt = e < s.fix.size() && s.fix[e] == i;
+            const double f = rebuilt ? d.taken(x, y) : 0.0;
+            for (int c = 0; c < 3; ++c) {
+                add[c] = l.add[k][c];
+                if (rebuilt) add[c] = std::min(add[c], f * excess[e * 3 + static_cast<std::size_t>(c)]);
+            }
+            if (!(add[0] + add[1] + add[2] > 0)) continue;
+            if (!add_light(hb.color, x, y, add, old)) {
+                restore_light(hb.color, x, y, old, add);
+                continue;
+            }
+            t.returned += (add[0] + add[1] + add[2]) / 3.0;
+            if (!mask.empty()) mask(x, y) = static_cast<std::uint8_t>(mask(x, y) | mask_bits::energy);
+        }
+        for (std::size_t j = 0; j < s.fix.size(); ++j) {
+            const float* ex = &excess[j * 3];
+            if (!(ex[0] > 0 || ex[1] > 0 || ex[2] > 0)) continue;
+            const int x = static_cast<int>(s.fix[j] % static_cast<std::uint32_t>(w)), y = static_cast<int>(s.fix[j] / static_cast<std::uint32_t>(w));
+            const double f = d.taken(x, y);
+            if (!(f > 0)) continue;  // the list's entry as it was, bit for bit
+            for (int c = 0; c < 3; ++c) {
+                const double rest = hb.color.load(x, y, c) + ex[c] * (1.0 - f);
+                float b = static_cast<float>(rest);
+                if (b > rest) b = std::nextafter(b, -HUGE_VALF);
+                s.before[j * 3 + static_cast<std::size_t>(c)] = b;
+                t.removed += ex[c] * f / 3.0;
+            }
+        }
+    }
+
     // return_energy: the colour of every pixel to rebuild, before the rebuild.
     template <class C, class V, class A>
     void keep_before(const half_buffer<C, V, A>& hb, half_state& s) {
@@ -1439,6 +1553,8 @@ private:
     };
     std::vector<strict_pair> spots_;   // decide_pairs: the strict highlights, by pixel
     energy_scratch energy_;            // return_energy: one for both halves, which take turns
+    density_scratch density_;          // return_energy: the density scale's arrays
+    std::vector<density_return::light> density_light_;  // and the light it gives
     double frame_level_ = 0;           // log of the largest p-value the frame's decision keeps
 };
 

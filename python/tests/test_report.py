@@ -90,6 +90,7 @@ def test_options_round_trip():
                "cluster_relative_error": 0.0, "kernel_width": 7, "sigma": 1.5, "tolerance": 1e-2,
                "max_iterations": 0, "rebuild": "spatial", "blend_spatial": False, "reconstruct": False,
                "find_dropped": False, "find_implausible": False, "return_energy": True, "energy_sigma": 4.0, "energy_coarse_sigma": 16.0,
+               "energy_density_evidence": 4.0,
                "local_test": False, "local_false_alarm": 1e-3, "local_radius": 2, "local_min_neighbours": 4,
                "local_variance_scale": 2.0, "local_spatial": False, "local_homogeneity": 0.05}
     assert set(changed) == set(defaults)  # every option is covered here
