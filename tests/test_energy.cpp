@@ -320,42 +320,45 @@ static double median9_of_max(const std::vector<float>& a, const std::vector<floa
 // removed fireflies took light: 437, 891 and 279 on the frames below. Its other half gets the
 // rest of the pair's share (energy.hpp, within_share): at most the return's shape P (the
 // 3x3 median), so where the kept half stands 2 P above it in every channel, nothing (before,
-// every such pixel-half took light: 43, 2 and 18 on these frames).
+// every such pixel-half took light: 43, 2 and 18 on these frames, seed 5). Two seeds: with the
+// return's finest scale (density.hpp) the output's medians rise where fireflies are dense, and
+// seed 5 alone has 36 pixel-halves beside a kept one far below it.
 TEST_CASE("two halves, return_energy: nothing added to an outlier kept within its noise", "[energy][pipeline]") {
     std::size_t all_beside = 0;
-    for (const char* name : {"dense30", "interior", "caustics"}) {
-        INFO(name);
-        const sim::frame f = sim::simulate(sim::named_scene(name, 320, 240, 5));
-        firefly_test::frame_views v(f);
-        detector d;
-        const frame_report r = v.process(d);
-        REQUIRE(r.ok());
-        CHECK(r.half[0].energy_returned > 0);
-        std::size_t kept = 0, added = 0, beside = 0, beside_lit = 0;
-        for (int h = 0; h < 2; ++h)
-            for (int y = 1; y + 1 < f.height; ++y)
-                for (int x = 1; x + 1 < f.width; ++x) {
-                    const std::size_t p = v.at(x, y);
-                    const std::uint8_t m = v.mask[h][p], o = v.mask[1 - h][p];
-                    kept += (m & mask_bits::consistent) != 0;
-                    added += (m & mask_bits::consistent) && (m & mask_bits::energy);
-                    if ((m & (mask_bits::consistent | mask_bits::firefly | mask_bits::nonfinite)) || !(o & mask_bits::consistent))
-                        continue;
-                    bool far = true;
-                    for (int c = 0; c < 3; ++c)
-                        far = far && f.color[1 - h][p * 3 + static_cast<std::size_t>(c)] - f.color[h][p * 3 + static_cast<std::size_t>(c)] >=
-                                         2.0 * median9_of_max(f.color[h], v.f.color[h], f.width, x, y, c);
-                    beside += far;
-                    beside_lit += far && (m & mask_bits::energy);
-                }
-        INFO(added << " of " << kept << " kept outliers took light; " << beside_lit << " of " << beside
-                   << " pixel-halves beside one far below it");
-        CHECK(kept > 20);
-        CHECK(added == 0);
-        CHECK(beside_lit == 0);
-        all_beside += beside;
-    }
-    CHECK(all_beside > 30);  // enough cases seen (36 since the density scale lifts the medians)
+    for (const unsigned seed : {5u, 6u})
+        for (const char* name : {"dense30", "interior", "caustics"}) {
+            INFO(name << ", seed " << seed);
+            const sim::frame f = sim::simulate(sim::named_scene(name, 320, 240, seed));
+            firefly_test::frame_views v(f);
+            detector d;
+            const frame_report r = v.process(d);
+            REQUIRE(r.ok());
+            CHECK(r.half[0].energy_returned > 0);
+            std::size_t kept = 0, added = 0, beside = 0, beside_lit = 0;
+            for (int h = 0; h < 2; ++h)
+                for (int y = 1; y + 1 < f.height; ++y)
+                    for (int x = 1; x + 1 < f.width; ++x) {
+                        const std::size_t p = v.at(x, y);
+                        const std::uint8_t m = v.mask[h][p], o = v.mask[1 - h][p];
+                        kept += (m & mask_bits::consistent) != 0;
+                        added += (m & mask_bits::consistent) && (m & mask_bits::energy);
+                        if ((m & (mask_bits::consistent | mask_bits::firefly | mask_bits::nonfinite)) || !(o & mask_bits::consistent))
+                            continue;
+                        bool far = true;
+                        for (int c = 0; c < 3; ++c)
+                            far = far && f.color[1 - h][p * 3 + static_cast<std::size_t>(c)] - f.color[h][p * 3 + static_cast<std::size_t>(c)] >=
+                                             2.0 * median9_of_max(f.color[h], v.f.color[h], f.width, x, y, c);
+                        beside += far;
+                        beside_lit += far && (m & mask_bits::energy);
+                    }
+            INFO(added << " of " << kept << " kept outliers took light; " << beside_lit << " of " << beside
+                       << " pixel-halves beside one far below it");
+            CHECK(kept > 20);
+            CHECK(added == 0);
+            CHECK(beside_lit == 0);
+            all_beside += beside;
+        }
+    CHECK(all_beside > 40);
 }
 
 // A pair kept as a highlight that stands above a smooth neighbourhood holds its rise above it

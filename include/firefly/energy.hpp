@@ -1078,6 +1078,19 @@ void restore_light(const image_view<C>& color, int x, int y, const double* old, 
 }
 
 namespace detail {
+// What a rebuild took from pixel (x, y) of `color`, channel by channel: before[c] less the
+// cleaned value, where that is finite and positive (else +0), as a float (at most FLT_MAX,
+// never above the difference). False where every channel is 0.
+template <class C>
+inline bool rebuilt_excess(const image_view<C>& color, int x, int y, const float* before, float* f) {
+    for (int c = 0; c < 3; ++c) {
+        const double d = static_cast<double>(before[c]) - color.load(x, y, c);
+        f[c] = std::isfinite(d) && d > 0 ? static_cast<float>(std::min(d, static_cast<double>(FLT_MAX))) : 0.0f;
+        if (f[c] > d) f[c] = std::nextafter(f[c], 0.0f);  // never above what was taken (return_energy_to_image)
+    }
+    return f[0] != 0.0f || f[1] != 0.0f || f[2] != 0.0f;
+}
+
 // The excess_map of what the rebuild took from `color`: at pixel rebuilt[e], before[3 e + c]
 // less the cleaned value, where that is finite and positive (else +0), as a float (what a
 // frame-sized float image of it would hold; at most FLT_MAX), straight from the list: nothing
@@ -1105,13 +1118,7 @@ inline void map_rebuilt_excess(const image_view<C>& color, const std::uint32_t* 
         const int x = static_cast<int>(p % static_cast<std::uint32_t>(w));
         const int y = static_cast<int>(p / static_cast<std::uint32_t>(w));
         float f[3];
-        for (int c = 0; c < 3; ++c) {
-            const double d = static_cast<double>(before[e * 3 + static_cast<std::size_t>(c)]) -
-                             color.load(x, y, c);
-            f[c] = std::isfinite(d) && d > 0 ? static_cast<float>(std::min(d, static_cast<double>(FLT_MAX))) : 0.0f;
-            if (f[c] > d) f[c] = std::nextafter(f[c], 0.0f);  // never above what was taken (return_energy_to_image)
-        }
-        if (f[0] == 0.0f && f[1] == 0.0f && f[2] == 0.0f) continue;  // as map_excess: no record
+        if (!rebuilt_excess(color, x, y, &before[e * 3], f)) continue;  // as map_excess: no record
         m.pixels.push_back(excess_at(x, f));
         ++m.start[static_cast<std::size_t>(y) + 1];
     }

@@ -262,7 +262,9 @@ public:
                  h.band_counts.capacity() * sizeof(stddev_counts) + h.before.capacity() * sizeof(float) + h.added.capacity() +
                  h.held.capacity() * sizeof(std::uint32_t) + h.held_values.capacity() * sizeof(float) + h.held_shares.capacity() +
                  h.recon.bytes();
-        return n + energy_.bytes() + density_.bytes() + density_light_.capacity() * sizeof(density_return::light);
+        return n + energy_.bytes() + density_.bytes() + density_light_.capacity() * sizeof(density_return::light) +
+               (density_excess_[0].capacity() + density_excess_[1].capacity()) * sizeof(float) +
+               density_taken_.capacity() * sizeof(double);
     }
 
     // Cleans both halves in place and reports. mask_a / mask_b (optional, 1 channel, the
@@ -1269,15 +1271,19 @@ private:
             if (!(options_.energy_density_evidence > 0) || hb[0]->color.channels() < 3) return;
             density_return d;
             d.prepare(w, h, density_);
-            float ex[3];
-            for (int k = 0; k < 2; ++k)
-                for (std::size_t e = 0; e < halves_[k].fix.size(); ++e)
-                    if (rebuilt_excess(*hb[k], halves_[k], e, ex)) density_.removed[halves_[k].fix[e]] = 1;
+            for (int k = 0; k < 2; ++k) {  // each half's excess, once, by list entry
+                const half_state& s = halves_[k];
+                density_excess_[k].assign(s.fix.size() * 3, 0.0f);
+                for (std::size_t e = 0; e < s.fix.size(); ++e)
+                    if (detail::rebuilt_excess(hb[k]->color, static_cast<int>(s.fix[e] % static_cast<std::uint32_t>(w)),
+                                               static_cast<int>(s.fix[e] / static_cast<std::uint32_t>(w)), &s.before[e * 3],
+                                               &density_excess_[k][e * 3]))
+                        density_.removed[s.fix[e]] = 1;
+            }
             if (!d.needed(options_.energy_density_evidence, density_)) return;
             for (int k = 0; k < 2; ++k)
                 for (std::size_t e = 0; e < halves_[k].fix.size(); ++e)
-                    if (rebuilt_excess(*hb[k], halves_[k], e, ex))
-                        std::copy_n(ex, 3, &density_.excess[k][static_cast<std::size_t>(halves_[k].fix[e]) * 3]);
+                    std::copy_n(&density_excess_[k][e * 3], 3, &density_.excess[k][static_cast<std::size_t>(halves_[k].fix[e]) * 3]);
             for (int y = 0; y < h; ++y)  // the cleaned halves' level, positive finite parts
                 for (int x = 0; x < w; ++x)
                     for (int c = 0; c < 3; ++c) {
@@ -1296,43 +1302,33 @@ private:
         }
     }
 
-    // What the rebuild took from entry e of the half's list: before less the cleaned value,
-    // where finite and positive (as energy.hpp maps it); false where nothing.
-    template <class C, class V, class A>
-    static bool rebuilt_excess(const half_buffer<C, V, A>& hb, const half_state& s, std::size_t e, float* ex) {
-        const int w = hb.color.width();
-        const int x = static_cast<int>(s.fix[e] % static_cast<std::uint32_t>(w)), y = static_cast<int>(s.fix[e] / static_cast<std::uint32_t>(w));
-        bool any = false;
-        for (int c = 0; c < 3; ++c) {
-            const double v = static_cast<double>(s.before[e * 3 + static_cast<std::size_t>(c)]) - hb.color.load(x, y, c);
-            ex[c] = std::isfinite(v) && v > 0 ? static_cast<float>(std::min(v, static_cast<double>(FLT_MAX))) : 0.0f;
-            if (ex[c] > v) ex[c] = std::nextafter(ex[c], 0.0f);
-            any = any || ex[c] > 0;
-        }
-        return any;
-    }
-
     // One half's density light (density_light_, half k), then its list's `before` lowered by
-    // the share given: the wider scales see the rest of each rebuilt pixel's excess.
+    // the share given: the wider scales see the rest of each rebuilt pixel's excess
+    // (density_excess_[k], by list entry).
     template <class C, class V, class A>
     void add_density_light(const half_buffer<C, V, A>& hb, half_state& s, const half_state& o, const density_return& d,
                            int k, const image_view<std::uint8_t>& mask, energy_totals& t) {
         const int w = hb.color.width();
         constexpr std::uint8_t kept = highlight_bit | consistent_bit;
-        std::vector<float> excess(s.fix.size() * 3, 0.0f);
-        for (std::size_t e = 0; e < s.fix.size(); ++e) rebuilt_excess(hb, s, e, &excess[e * 3]);
+        const std::vector<float>& excess = density_excess_[static_cast<std::size_t>(k)];
+        auto xy = [w](std::uint32_t i) { return std::pair<int, int>(static_cast<int>(i % static_cast<std::uint32_t>(w)), static_cast<int>(i / static_cast<std::uint32_t>(w))); };
+        std::vector<double>& taken = density_taken_;  // f of each entry with excess, once
+        taken.assign(s.fix.size(), 0.0);
+        for (std::size_t e = 0; e < s.fix.size(); ++e) {
+            const float* ex = &excess[e * 3];
+            if (ex[0] > 0 || ex[1] > 0 || ex[2] > 0) taken[e] = d.taken(xy(s.fix[e]).first, xy(s.fix[e]).second);
+        }
         std::size_t e = 0;  // the list's entry at or after the pixel
         for (const density_return::light& l : density_light_) {
             const std::uint32_t i = l.pixel;
             while (e < s.fix.size() && s.fix[e] < i) ++e;
             if (cls(s.label[i]) != valid_class || (s.label[i] & kept) || (o.label[i] & kept)) continue;
-            const int x = static_cast<int>(i % static_cast<std::uint32_t>(w)), y = static_cast<int>(i / static_cast<std::uint32_t>(w));
+            const auto [x, y] = xy(i);
             double add[3], old[3];
             const bool rebuilt = e < s.fix.size() && s.fix[e] == i;
-            const double f = rebuilt ? d.taken(x, y) : 0.0;
             for (int c = 0; c < 3; ++c) {
                 add[c] = l.add[k][c];
-                if (rebuilt) add[c] = std::min(add[c], f * excess[e * 3 + static_cast<std::size_t>(c)]);
+                if (rebuilt) add[c] = std::min(add[c], taken[e] * excess[e * 3 + static_cast<std::size_t>(c)]);
             }
             if (!(add[0] + add[1] + add[2] > 0)) continue;
             if (!add_light(hb.color, x, y, add, old)) {
@@ -1343,17 +1339,16 @@ private:
             if (!mask.empty()) mask(x, y) = static_cast<std::uint8_t>(mask(x, y) | mask_bits::energy);
         }
         for (std::size_t j = 0; j < s.fix.size(); ++j) {
-            const float* ex = &excess[j * 3];
-            if (!(ex[0] > 0 || ex[1] > 0 || ex[2] > 0)) continue;
-            const int x = static_cast<int>(s.fix[j] % static_cast<std::uint32_t>(w)), y = static_cast<int>(s.fix[j] / static_cast<std::uint32_t>(w));
-            const double f = d.taken(x, y);
+            const double f = taken[j];
             if (!(f > 0)) continue;  // the list's entry as it was, bit for bit
+            const auto [x, y] = xy(s.fix[j]);
             for (int c = 0; c < 3; ++c) {
-                const double rest = hb.color.load(x, y, c) + ex[c] * (1.0 - f);
+                const float ex = excess[j * 3 + static_cast<std::size_t>(c)];
+                const double rest = hb.color.load(x, y, c) + ex * (1.0 - f);
                 float b = static_cast<float>(rest);
                 if (b > rest) b = std::nextafter(b, -HUGE_VALF);
                 s.before[j * 3 + static_cast<std::size_t>(c)] = b;
-                t.removed += ex[c] * f / 3.0;
+                t.removed += ex * f / 3.0;
             }
         }
     }
@@ -1555,6 +1550,8 @@ private:
     energy_scratch energy_;            // return_energy: one for both halves, which take turns
     density_scratch density_;          // return_energy: the density scale's arrays
     std::vector<density_return::light> density_light_;  // and the light it gives
+    std::vector<float> density_excess_[2];  // and each half's removed excess, by list entry
+    std::vector<double> density_taken_;     // and the share f of an entry's excess it gave
     double frame_level_ = 0;           // log of the largest p-value the frame's decision keeps
 };
 
