@@ -4,6 +4,7 @@
 #include <firefly/sim/scene.hpp>
 #include <firefly/sim/scenes.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -125,26 +126,32 @@ TEST_CASE("density return: a disc lit by rare samples keeps its light", "[densit
     }
 }
 
-// The same bits for any flip or transpose of the frame (the orbit sums), and any thread count.
+// The same bits for any flip or transpose of the frame (the sums both ways), and any thread
+// count; the second frame is wider than a tile, its disc across the tiles' corners.
 TEST_CASE("density return: the 8 flips and transposes and two threads give the same bits", "[density][invariant]") {
-    const bokeh_frame f(72, 56, 30, 27, 5);
-    const cleaned ref = clean(f.color, f.variance, f.w, f.h, 8.0);
-    REQUIRE(ref.report.ok());
-    REQUIRE(ref.report.half[0].energy_returned > 0);
-    for (int sym = 1; sym < 8; ++sym) {
-        const firefly_test::symmetry s{sym, f.w, f.h};
-        std::vector<float> c[2], v[2];
-        for (int k = 0; k < 2; ++k) c[k] = s.apply(f.color[k], 3), v[k] = s.apply(f.variance[k], 3);
-        const cleaned r = clean(c, v, s.width(), s.height(), 8.0);
-        REQUIRE(r.report.ok());
-        INFO("symmetry " << sym);
-        for (int k = 0; k < 2; ++k) {
-            CHECK(std::memcmp(s.apply(ref.color[k], 3).data(), r.color[k].data(), r.color[k].size() * sizeof(float)) == 0);
-            CHECK(s.apply(ref.mask[k], 1) == r.mask[k]);
+    for (const bokeh_frame& f : {bokeh_frame(72, 56, 30, 27, 5), bokeh_frame(150, 45, 128, 32, 6)}) {
+        INFO(f.w << " x " << f.h);
+        const cleaned ref = clean(f.color, f.variance, f.w, f.h, 8.0);
+        REQUIRE(ref.report.ok());
+        REQUIRE(ref.report.half[0].energy_returned > 0);
+        const cleaned without = clean(f.color, f.variance, f.w, f.h, 0.0);  // the density gave light
+        REQUIRE(std::memcmp(without.color[0].data(), ref.color[0].data(), ref.color[0].size() * sizeof(float)) != 0);
+        for (int sym = 1; sym < 8; ++sym) {
+            const firefly_test::symmetry s{sym, f.w, f.h};
+            std::vector<float> c[2], v[2];
+            for (int k = 0; k < 2; ++k) c[k] = s.apply(f.color[k], 3), v[k] = s.apply(f.variance[k], 3);
+            const cleaned r = clean(c, v, s.width(), s.height(), 8.0);
+            REQUIRE(r.report.ok());
+            INFO("symmetry " << sym);
+            for (int k = 0; k < 2; ++k) {
+                CHECK(std::memcmp(s.apply(ref.color[k], 3).data(), r.color[k].data(), r.color[k].size() * sizeof(float)) == 0);
+                CHECK(s.apply(ref.mask[k], 1) == r.mask[k]);
+            }
         }
+        const cleaned two = clean(f.color, f.variance, f.w, f.h, 8.0, executor::threads(2));
+        for (int k = 0; k < 2; ++k)
+            CHECK(std::memcmp(ref.color[k].data(), two.color[k].data(), two.color[k].size() * sizeof(float)) == 0);
     }
-    const cleaned two = clean(f.color, f.variance, f.w, f.h, 8.0, executor::threads(2));
-    for (int k = 0; k < 2; ++k) CHECK(std::memcmp(ref.color[k].data(), two.color[k].data(), two.color[k].size() * sizeof(float)) == 0);
 }
 
 // Where no window holds more than `evidence` removed pixels nothing can pass: a frame of
@@ -192,19 +199,54 @@ TEST_CASE("density return: options", "[density][options]") {
     }
 }
 
-// The orbit sums are exact where they can be: weights sum to 1, and a window of ones sums to 1.
-TEST_CASE("density return: the window's weights", "[density]") {
+// The tiled sums against the window's sums taken directly, on a frame of several tiles whose
+// sides are no multiple of a tile's: the weights sum to 1, and every pixel's sums (weights and
+// squared weights) agree with the direct ones to round-off, at the frame's edges too; one
+// pixel's sums taken alone are the same bits as the tile's.
+TEST_CASE("density return: the window's sums", "[density][invariant]") {
     const detail::density_weights dw;
-    double one = 0;
-    detail::window_sums<1, -1>(dw, [](int, int, double* v) { v[0] = 1.0; }, &one);
-    CHECK(one == Approx(1.0).epsilon(1e-14));
-    double sq = 0;  // sum of w^2 over the window, against a direct sum
-    detail::window_sums<1, 0>(dw, [](int, int, double* v) { v[0] = 1.0; }, &sq);
-    double direct = 0;
-    for (int dy = -detail::density_radius; dy <= detail::density_radius; ++dy)
-        for (int dx = -detail::density_radius; dx <= detail::density_radius; ++dx) {
-            const int a = std::max(std::abs(dx), std::abs(dy)), b = std::min(std::abs(dx), std::abs(dy));
-            direct += dw.w[a][b] * dw.w[a][b];
-        }
-    CHECK(sq == Approx(direct).epsilon(1e-14));
+    double total = 0;
+    for (int a = -detail::density_radius; a <= detail::density_radius; ++a)
+        for (int b = -detail::density_radius; b <= detail::density_radius; ++b) total += dw.g[std::abs(a)] * dw.g[std::abs(b)];
+    CHECK(total == Approx(1.0).epsilon(1e-14));
+    const int sizes[][2] = {{45, 38}, {1, 1}, {3, 2}, {2, 7}};  // and frames smaller than the window
+    for (const auto& size : sizes) {
+        const int w = size[0], h = size[1], tw = 16, th = 12;
+        INFO(w << " x " << h);
+        std::mt19937 rng(7);
+        std::vector<double> v(static_cast<std::size_t>(w * h));
+        for (double& x : v) x = std::exp(static_cast<double>(rng() % 2000) / 100.0 - 10.0);  // 1e-4 .. 5e4
+        auto load = [&](int x, int y, double* o) { o[0] = o[1] = v[static_cast<std::size_t>(y * w + x)]; };
+        const double* g[2] = {dw.g, dw.g2};
+        detail::density_sums<2> sums;
+        std::vector<double> m;
+        double worst = 0;
+        std::size_t same = 0;
+        for (int y0 = 0; y0 < h; y0 += th)
+            for (int x0 = 0; x0 < w; x0 += tw) {
+                const int cw = std::min(tw, w - x0), ch = std::min(th, h - y0);
+                m.assign(static_cast<std::size_t>(cw * ch * 2), -1.0);
+                sums.run(w, h, x0, y0, cw, ch, g, load, m.data());
+                for (int j = 0; j < ch; ++j)
+                    for (int i = 0; i < cw; ++i) {
+                        double direct[2] = {0, 0};
+                        for (int b = -detail::density_radius; b <= detail::density_radius; ++b)
+                            for (int a = -detail::density_radius; a <= detail::density_radius; ++a) {
+                                const int x = x0 + i + a, y = y0 + j + b;
+                                if (x < 0 || y < 0 || x >= w || y >= h) continue;
+                                const double wt = dw.g[std::abs(a)] * dw.g[std::abs(b)];
+                                direct[0] += wt * v[static_cast<std::size_t>(y * w + x)];
+                                direct[1] += wt * wt * v[static_cast<std::size_t>(y * w + x)];
+                            }
+                        double one[2];  // one pixel's sums alone: the same bits
+                        sums.at(w, h, x0 + i, y0 + j, g, load, one);
+                        for (int k = 0; k < 2; ++k) {
+                            worst = std::max(worst, std::abs(m[static_cast<std::size_t>((j * cw + i) * 2 + k)] / direct[k] - 1.0));
+                            same += one[k] == m[static_cast<std::size_t>((j * cw + i) * 2 + k)];
+                        }
+                    }
+            }
+        CHECK(worst < 1e-13);
+        CHECK(same == static_cast<std::size_t>(w * h * 2));
+    }
 }

@@ -27,21 +27,27 @@
 // 0.0314 but after NL-means 0.0664 -> 0.0465 (its cores are lit by fireflies, whose density is
 // noisier than the wider scales, which a denoiser averages); the held-out bokeh render at 64
 // and 8 samples a half 0.0149 -> 0.0132 and 0.0388 -> 0.0289; the Cycles caustics 0.02426 ->
-// 0.02449; every other scene and the Cycles interior unchanged to 4 digits. Its cost is
-// the 9 x 9 sums at every pixel of a dense frame: dense30 755 -> 1281 ms at 1024x540.
+// 0.02449; every other scene and the Cycles interior unchanged to 4 digits. Its cost is the
+// window sums at every pixel of a dense frame: at 2K, dense30's rebuild stage ~1.2 s (1.8-2.6 s
+// with the window's 81 taps summed pixel by pixel); at 1024x540, a fresh detector's first two
+// frames of the simulated caustics 198 -> 253 ms, of sparse fireflies a pass of counts.
 //
 // A pixel gets no density light where either half kept an outlier (a highlight, or one within
 // its noise: it holds its light already), where it is ignored (black, alpha 0), and a rebuilt
 // pixel at most f e of what its rebuild took (the wider scales' cap takes the rest).
 //
-// Sums: the window's 81 taps fall into orbits of the frame's 8 flips and transposes (offsets
-// (a, b), (b, a) and their signs share one weight), and each orbit's values are added in a tree
-// that every symmetry maps onto itself, so a flipped or transposed frame gives the flipped or
-// transposed result bit for bit; orbits are added in a fixed order. A window with no more than
-// c removed pixels cannot pass (|M|^2 <= N V for N terms, Cauchy-Schwarz): an integral image of
-// the removed pixels skips those windows exactly, so a frame of sparse fireflies costs a pass
-// of counts. Memory: 5 bytes a pixel for the flags and counts; where some window passes, 28
-// more (both halves' excess, the level, the factors) and the list of pixels given light.
+// Sums: the Gaussian is separable, and its sums are taken both ways, along rows then columns
+// and along columns then rows, and averaged: a transpose swaps the two orders, and each axis'
+// sum adds opposite taps first, which a flip swaps, so a flipped or transposed frame gives the
+// flipped or transposed result bit for bit. In tiles of 128 x 32 pixels (one channel's buffers
+// stay in a core's L2) the row and column passes cost ~45 ns a pixel for the 8 values; where few of
+// a tile's pixels need them, each pixel's window is summed alone in the same order (the same
+// bits, ~280 ns). A window with no more than c removed pixels cannot pass (|M|^2 <= N V for N
+// terms, Cauchy-Schwarz): an integral image of the removed pixels skips those windows, and
+// whole tiles, exactly, so a frame of sparse fireflies costs a pass of counts. The caller gives
+// each pixel's values (its halves' excess and cleaned level) as they are read; memory: 5 bytes
+// a pixel for the flags and counts; where some window passes, 4 for the factors, 4 for their
+// sums and the list of pixels given light (the pipeline adds 8 for each pixel's list entries).
 #pragma once
 
 #include <algorithm>
@@ -50,6 +56,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "fused.hpp"
 #include "parallel.hpp"
 
 namespace firefly {
@@ -57,57 +64,126 @@ namespace detail {
 
 inline constexpr int density_radius = 4;  // 9 x 9, sigma 2
 
-// The orbit weights w(a, b), 0 <= b <= a <= radius, normalised over the whole window.
+// The window's weights, separable: w(a, b) = g[|a|] g[|b|], g the Gaussian of sigma 2 over
+// -4..4 normalised (w sums to 1 over the window); g2 = g^2, the weights of the variance's sums.
 struct density_weights {
-    double w[density_radius + 1][density_radius + 1] = {};
+    double g[density_radius + 1] = {}, g2[density_radius + 1] = {};
     density_weights() {
         double z = 0;
-        for (int dy = -density_radius; dy <= density_radius; ++dy)
-            for (int dx = -density_radius; dx <= density_radius; ++dx) z += std::exp(-(dx * dx + dy * dy) / 8.0);
-        for (int a = 0; a <= density_radius; ++a)
-            for (int b = 0; b <= a; ++b) w[a][b] = std::exp(-(a * a + b * b) / 8.0) / z;
+        for (int a = -density_radius; a <= density_radius; ++a) z += std::exp(-a * a / 8.0);
+        for (int a = 0; a <= density_radius; ++a) g[a] = std::exp(-a * a / 8.0) / z, g2[a] = g[a] * g[a];
     }
 };
 
-// The sum of v over the orbit of offset (a, b), 0 <= b <= a, in a tree each of the 8
-// symmetries maps onto itself. v(dx, dy, out) writes N values (0 outside the frame); out: N.
-template <int N, class V>
-inline void orbit_sum(int a, int b, V&& v, double* out) {
-    double t[8][N];
-    auto pair = [&](int i, int j, double* r) {
-        for (int k = 0; k < N; ++k) r[k] = t[i][k] + t[j][k];
-    };
-    if (a == 0) {
-        v(0, 0, out);
-        return;
+// The weighted sum of p[i step], |i| <= 4: opposite taps added first, then in a fixed order, so
+// a flipped axis gives the same bits; the fusing written out where the target fuses (fused.hpp),
+// so every loop that calls it gives the same bits too.
+inline double axis_sum(const double* p, std::ptrdiff_t step, const double* g) noexcept {
+    double s = g[0] * p[0];
+    for (int a = 1; a <= density_radius; ++a) {
+#ifdef FIREFLY_DETAIL_TARGET_FMA
+        s = std::fma(g[a], p[-a * step] + p[a * step], s);
+#else
+        s += g[a] * (p[-a * step] + p[a * step]);
+#endif
     }
-    double p[4][N];
-    if (b == 0 || a == b) {
-        // (a, 0): x pair and y pair; (a, a): the two diagonals
-        if (b == 0) v(a, 0, t[0]), v(-a, 0, t[1]), v(0, a, t[2]), v(0, -a, t[3]);
-        else v(a, a, t[0]), v(-a, -a, t[1]), v(-a, a, t[2]), v(a, -a, t[3]);
-        pair(0, 1, p[0]), pair(2, 3, p[1]);
-        for (int k = 0; k < N; ++k) out[k] = p[0][k] + p[1][k];
-        return;
-    }
-    v(a, b, t[0]), v(-a, b, t[1]), v(a, -b, t[2]), v(-a, -b, t[3]);  // S: pairs by the sign of x
-    v(b, a, t[4]), v(b, -a, t[5]), v(-b, a, t[6]), v(-b, -a, t[7]);  // T: by the sign of y
-    pair(0, 1, p[0]), pair(2, 3, p[1]), pair(4, 5, p[2]), pair(6, 7, p[3]);
-    for (int k = 0; k < N; ++k) out[k] = (p[0][k] + p[1][k]) + (p[2][k] + p[3][k]);
+    return s;
 }
 
-// The Gaussian-weighted sums over the window of (x, y): values v (N of them) with weight w,
-// and, when SQ >= 0, value SQ with weight w^2 instead.
-template <int N, int SQ, class V>
-inline void window_sums(const density_weights& dw, V&& v, double* out) {
-    for (int k = 0; k < N; ++k) out[k] = 0;
-    double o[N];
-    for (int a = 0; a <= density_radius; ++a)
-        for (int b = 0; b <= a; ++b) {
-            orbit_sum<N>(a, b, v, o);
-            for (int k = 0; k < N; ++k) out[k] += (k == SQ ? dw.w[a][b] * dw.w[a][b] : dw.w[a][b]) * o[k];
+// The window sums of N values at every pixel of a tile (channel k weighted by g[k]: the
+// density's weights or their squares), 0 outside the frame. A separable sum taken rows first
+// and columns first gives the same value to round-off; the mean of both is the same bits under
+// the frame's 8 flips and transposes (a transpose swaps the two orders, a flip the taps of a
+// pair) and does not depend on the tiling. Buffers are kept between tiles.
+template <int N>
+class density_sums {
+public:
+    static constexpr int r = density_radius;
+
+    // The sums over the tile [x0, x0 + tw) x [y0, y0 + th) of a w x h frame, into out (N per
+    // pixel, row-major in the tile); load(x, y, v) writes the N values of an in-frame pixel.
+    template <class Load>
+    void run(int w, int h, int x0, int y0, int tw, int th, const double* const (&g)[N], Load&& load, double* out) {
+        const int pw = tw + 2 * r, ph = th + 2 * r;
+        const std::size_t plane = static_cast<std::size_t>(pw) * static_cast<std::size_t>(ph);
+        in_.assign(plane * N, 0.0);
+        rows_.resize(static_cast<std::size_t>(tw) * static_cast<std::size_t>(ph) * N);
+        cols_.resize(static_cast<std::size_t>(pw) * static_cast<std::size_t>(th) * N);
+        double v[N];
+        for (int j = std::max(0, r - y0); j < std::min(ph, h - y0 + r); ++j)
+            for (int i = std::max(0, r - x0); i < std::min(pw, w - x0 + r); ++i) {
+                load(x0 - r + i, y0 - r + j, v);
+                for (int k = 0; k < N; ++k) in_[plane * k + offset(i, j, pw)] = v[k];
+            }
+        for (int k = 0; k < N; ++k) {
+            const double* in = &in_[plane * k];
+            double* rows = &rows_[static_cast<std::size_t>(tw) * static_cast<std::size_t>(ph) * k];
+            double* cols = &cols_[static_cast<std::size_t>(pw) * static_cast<std::size_t>(th) * k];
+            for (int j = 0; j < ph; ++j)  // along rows, every row of the padded tile
+                for (int i = 0; i < tw; ++i) rows[offset(i, j, tw)] = axis_sum(&in[offset(i + r, j, pw)], 1, g[k]);
+            for (int j = 0; j < th; ++j)  // along columns, every column of the padded tile
+                for (int i = 0; i < pw; ++i) cols[offset(i, j, pw)] = axis_sum(&in[offset(i, j + r, pw)], pw, g[k]);
+            for (int j = 0; j < th; ++j)
+                for (int i = 0; i < tw; ++i) {
+                    const double rc = axis_sum(&rows[offset(i, j + r, tw)], tw, g[k]);  // rows, then columns
+                    const double cr = axis_sum(&cols[offset(i + r, j, pw)], 1, g[k]);   // columns, then rows
+                    out[offset(i, j, tw) * N + static_cast<std::size_t>(k)] = (rc + cr) * 0.5;
+                }
         }
-}
+    }
+
+    // The sums at one pixel (x, y), the same bits as run() gives it: the same axis sums, in
+    // the same order, over the pixel's window alone (cheaper where few pixels of a tile need
+    // them); the N channels side by side, so that each step is one vector operation.
+    template <class Load>
+    void at(int w, int h, int x, int y, const double* const (&g)[N], Load&& load, double* out) const {
+        constexpr int d = 2 * r + 1;
+        double in[d * d][N], rows[d][N], cols[d][N], gw[r + 1][N];
+        for (int a = 0; a <= r; ++a)
+            for (int k = 0; k < N; ++k) gw[a][k] = g[k][a];
+        const int j0 = std::max(0, r - y), j1 = std::min(d, h - y + r), i0 = std::max(0, r - x), i1 = std::min(d, w - x + r);
+        if (j0 > 0 || i0 > 0 || j1 < d || i1 < d)  // at the frame's edge: 0 outside it
+            for (auto& p : in)
+                for (double& v : p) v = 0;
+        for (int j = j0; j < j1; ++j)
+            for (int i = i0; i < i1; ++i) load(x - r + i, y - r + j, in[j * d + i]);
+        for (int b = 0; b < d; ++b) {
+            axis_sums(in[b * d + r], 1, gw, rows[b]);
+            axis_sums(in[r * d + b], d, gw, cols[b]);
+        }
+        double rc[N], cr[N];
+        axis_sums(rows[r], 1, gw, rc);
+        axis_sums(cols[r], 1, gw, cr);
+        for (int k = 0; k < N; ++k) out[k] = (rc[k] + cr[k]) * 0.5;
+    }
+
+    // Whether run() costs less than at() for `pixels` of a tile of tw x th: one pixel alone
+    // costs about 6 pixels of a whole tile (at 1024x540: 280 and 45 ns a pixel for 8 values;
+    // the one value of the shares takes the same rule). Only speed depends on it: the bits
+    // are the same either way.
+    static bool whole_tile(std::size_t pixels, int tw, int th) noexcept {
+        return pixels * 6 > static_cast<std::size_t>(tw) * static_cast<std::size_t>(th);
+    }
+
+private:
+    // axis_sum of each of N channels side by side: p[i step][k], weights gw[a][k].
+    static void axis_sums(const double* p, std::ptrdiff_t step, const double (&gw)[r + 1][N], double* out) noexcept {
+        const std::ptrdiff_t s = step * N;
+        for (int k = 0; k < N; ++k) out[k] = gw[0][k] * p[k];
+        for (int a = 1; a <= r; ++a)
+            for (int k = 0; k < N; ++k) {
+#ifdef FIREFLY_DETAIL_TARGET_FMA
+                out[k] = std::fma(gw[a][k], p[k - a * s] + p[k + a * s], out[k]);
+#else
+                out[k] += gw[a][k] * (p[k - a * s] + p[k + a * s]);
+#endif
+            }
+    }
+    static std::size_t offset(int i, int j, int stride) noexcept {
+        return static_cast<std::size_t>(j) * static_cast<std::size_t>(stride) + static_cast<std::size_t>(i);
+    }
+    std::vector<double> in_, rows_, cols_;  // N planes each
+};
 
 }  // namespace detail
 
@@ -115,20 +191,19 @@ inline void window_sums(const density_weights& dw, V&& v, double* out) {
 struct density_scratch {
     std::vector<std::uint8_t> removed;  // 1 where either half had excess removed
     std::vector<std::uint32_t> count;  // integral image of removed pixels, (w + 1) x (h + 1)
-    std::vector<float> excess[2];      // per half, 3 per pixel
-    std::vector<float> level;          // the cleaned halves' sum, 3 per pixel
     std::vector<float> factor;         // s per pixel
+    std::vector<float> share;          // G * s at removed pixels: the share f of their excess given
     std::size_t bytes() const noexcept {
-        return removed.capacity() + count.capacity() * sizeof(std::uint32_t) +
-               (excess[0].capacity() + excess[1].capacity() + level.capacity() + factor.capacity()) * sizeof(float);
+        return removed.capacity() + (count.capacity() + factor.capacity() + share.capacity()) * 4;
     }
 };
 
 // The density return of both halves. The caller marks removed (1 per pixel, w x h, zeroed by
-// prepare()) where either half had excess removed; where needed() (the arrays sized then)
-// fills excess[h] (3 per pixel, >= 0) with what the rebuild removed from half h and level (3
-// per pixel) with the cleaned halves' sum. run() lists the light to give each half;
-// taken(x, y) then is the share f of the pixel's removed excess given.
+// prepare()) where either half had excess removed; where needed(), run() lists the light to
+// give each half, reading each pixel's values through the caller's load(x, y, v): v[0..2] and
+// v[3..5] what the rebuild removed from halves A and B (>= 0), v[6] |e_A + e_B|^2 and v[7] the
+// cleaned halves' sum over the channels. taken(x, y) then is the share f of a removed pixel's
+// excess given.
 class density_return {
 public:
     // removed zeroed, w x h.
@@ -143,46 +218,42 @@ public:
         float add[2][3];
     };
 
-    // Whether any window holds more than `evidence` removed pixels (else nothing can pass),
-    // from the excess filled in; the level is needed, and run() worth calling, only then.
+    // Whether any window holds more than `evidence` removed pixels (else nothing can pass):
+    // run() is worth calling only then.
     bool needed(double evidence, density_scratch& s) {
         s_ = &s;
-        if (!(evidence > 0 && w_ > 0 && h_ > 0 && count_removed(evidence))) return false;
-        const std::size_t n = s.removed.size() * 3;
-        for (auto& e : s.excess) e.assign(n, 0.0f);
-        s.level.assign(n, 0.0f);
+        return evidence > 0 && w_ > 0 && h_ > 0 && count_removed(evidence);
+    }
+
+    // The pixels that get light, row-major, in `out` (after needed() returned true for this
+    // frame), and the share each removed pixel's excess gave (taken()); false when none.
+    template <class Load>
+    bool run(double evidence, density_scratch& s, std::vector<light>& out, const executor& exec, const Load& load) {
+        s_ = &s;
+        out.clear();
+        s.share.clear();  // taken() is 0 until the shares are summed
+        const std::size_t n = static_cast<std::size_t>(w_) * static_cast<std::size_t>(h_);
+        if (!(evidence > 0) || n == 0 || s.count.size() != (static_cast<std::size_t>(w_) + 1) * (static_cast<std::size_t>(h_) + 1))
+            return false;  // needed() has not counted this frame
+        s.factor.assign(n, 0.0f);
+        std::vector<std::vector<light>> bands(static_cast<std::size_t>((h_ + tile_h - 1) / tile_h));
+        exec.run(bands.size(), [&](std::size_t b) { factor_band(static_cast<int>(b), evidence, load, bands[b]); });
+        for (const auto& b : bands) out.insert(out.end(), b.begin(), b.end());
+        if (out.empty()) return false;
+        s.share.assign(n, 0.0f);
+        exec.run(bands.size(), [&](std::size_t b) { share_band(static_cast<int>(b)); });
         return true;
     }
 
-    // The pixels that get light, row-major, in `out` (after needed() and the level filled in);
-    // false when none.
-    bool run(double evidence, density_scratch& s, std::vector<light>& out, const executor& exec) {
-        s_ = &s;
-        out.clear();
-        if (!(evidence > 0) || w_ <= 0 || h_ <= 0) return false;
-        s.factor.assign(static_cast<std::size_t>(w_) * static_cast<std::size_t>(h_), 0.0f);
-        constexpr int band = 16;
-        std::vector<std::vector<light>> bands(static_cast<std::size_t>((h_ + band - 1) / band));
-        exec.run(bands.size(), [&](std::size_t bi) {
-            for (int y = static_cast<int>(bi) * band; y < std::min(h_, static_cast<int>(bi + 1) * band); ++y)
-                for (int x = 0; x < w_; ++x) pixel(x, y, evidence, bands[bi]);
-        });
-        for (const auto& b : bands) out.insert(out.end(), b.begin(), b.end());
-        return !out.empty();
-    }
-
-    // The share of pixel (x, y)'s removed excess that the density gave back: sum_p w_pq s(p).
+    // The share of pixel (x, y)'s removed excess that the density gave back: sum_p w_pq s(p)
+    // (at a pixel marked removed; 0 elsewhere).
     double taken(int x, int y) const {
-        double f = 0;
-        detail::window_sums<1, -1>(weights_, [&](int dx, int dy, double* v) {
-            const int xx = x + dx, yy = y + dy;
-            v[0] = inside(xx, yy) ? s_->factor[index(xx, yy)] : 0.0;
-        }, &f);
-        return std::min(f, 1.0);
+        return s_ && !s_->share.empty() ? std::min(static_cast<double>(s_->share[index(x, y)]), 1.0) : 0.0;
     }
 
 private:
-    bool inside(int x, int y) const noexcept { return x >= 0 && y >= 0 && x < w_ && y < h_; }
+    static constexpr int tile_w = 128, tile_h = 32;  // one channel's buffers stay in a core's L2
+
     std::size_t index(int x, int y) const noexcept {
         return static_cast<std::size_t>(y) * static_cast<std::size_t>(w_) + static_cast<std::size_t>(x);
     }
@@ -206,34 +277,51 @@ private:
                 if (window_count(x, y) > evidence) return true;
         return false;
     }
-    double window_count(int x, int y) const {
+    // Removed pixels in the window of (x, y), clipped to the frame, of the box [x0, x1) x [y0, y1)
+    // grown by the radius.
+    double box_count(int x0, int y0, int x1, int y1) const {
         const std::size_t W = static_cast<std::size_t>(w_) + 1;
         const int r = detail::density_radius;
-        const std::size_t x0 = static_cast<std::size_t>(std::max(0, x - r)), x1 = static_cast<std::size_t>(std::min(w_, x + r + 1));
-        const std::size_t y0 = static_cast<std::size_t>(std::max(0, y - r)), y1 = static_cast<std::size_t>(std::min(h_, y + r + 1));
+        const std::size_t a0 = static_cast<std::size_t>(std::max(0, x0 - r)), a1 = static_cast<std::size_t>(std::min(w_, x1 + r));
+        const std::size_t b0 = static_cast<std::size_t>(std::max(0, y0 - r)), b1 = static_cast<std::size_t>(std::min(h_, y1 + r));
         const std::vector<std::uint32_t>& c = s_->count;
-        return static_cast<double>(c[y1 * W + x1] + c[y0 * W + x0] - c[y0 * W + x1] - c[y1 * W + x0]);
+        return static_cast<double>(c[b1 * W + a1] + c[b0 * W + a0] - c[b0 * W + a1] - c[b1 * W + a0]);
+    }
+    double window_count(int x, int y) const { return box_count(x, y, x + 1, y + 1); }
+
+    // s at every pixel of band b whose window can pass, and the two halves' light where s > 0,
+    // appended to out in row-major order.
+    template <class Load>
+    void factor_band(int b, double evidence, const Load& load, std::vector<light>& out) {
+        detail::density_sums<8> sums;
+        std::vector<double> m;
+        const double* g[8] = {weights_.g, weights_.g, weights_.g, weights_.g, weights_.g, weights_.g, weights_.g2, weights_.g};
+        const int y0 = b * tile_h, th = std::min(tile_h, h_ - y0);
+        for (int x0 = 0; x0 < w_; x0 += tile_w) {
+            const int tw = std::min(tile_w, w_ - x0);
+            if (!(box_count(x0, y0, x0 + tw, y0 + th) > evidence)) continue;  // no window in it passes
+            std::size_t passing = 0;
+            for (int y = y0; y < y0 + th; ++y)
+                for (int x = x0; x < x0 + tw; ++x) passing += window_count(x, y) > evidence;
+            const bool whole = detail::density_sums<8>::whole_tile(passing, tw, th);
+            if (whole) {
+                m.resize(static_cast<std::size_t>(tw) * static_cast<std::size_t>(th) * 8);
+                sums.run(w_, h_, x0, y0, tw, th, g, load, m.data());
+            }
+            double one[8];
+            for (int j = 0; j < th; ++j)
+                for (int i = 0; i < tw; ++i) {
+                    if (!(window_count(x0 + i, y0 + j) > evidence)) continue;
+                    if (!whole) sums.at(w_, h_, x0 + i, y0 + j, g, load, one);
+                    pixel(x0 + i, y0 + j, evidence, whole ? &m[(static_cast<std::size_t>(j) * static_cast<std::size_t>(tw) + static_cast<std::size_t>(i)) * 8] : one, out);
+                }
+        }
+        std::sort(out.begin(), out.end(), [](const light& a, const light& c) { return a.pixel < c.pixel; });
     }
 
-    // s and the two halves' light at (x, y), appended to out where s > 0.
-    void pixel(int x, int y, double evidence, std::vector<light>& out) {
-        if (!(window_count(x, y) > evidence)) return;
-        double m[8];  // M_A (3), M_B (3), V, L
-        detail::window_sums<8, 6>(weights_, [&](int dx, int dy, double* v) {
-            const int xx = x + dx, yy = y + dy;
-            if (!inside(xx, yy)) {
-                for (int k = 0; k < 8; ++k) v[k] = 0;
-                return;
-            }
-            const std::size_t i = index(xx, yy) * 3;
-            v[6] = v[7] = 0;
-            for (int k = 0; k < 3; ++k) {
-                v[k] = s_->excess[0][i + static_cast<std::size_t>(k)];
-                v[3 + k] = s_->excess[1][i + static_cast<std::size_t>(k)];
-                v[6] += (v[k] + v[3 + k]) * (v[k] + v[3 + k]);
-                v[7] += s_->level[i + static_cast<std::size_t>(k)];
-            }
-        }, m);
+    // s and the two halves' light at (x, y) from its window sums m (M_A, M_B, V, L), appended
+    // to out where s > 0.
+    void pixel(int x, int y, double evidence, const double* m, std::vector<light>& out) {
         double m2 = 0, sum = 0;
         for (int k = 0; k < 3; ++k) m2 += (m[k] + m[3 + k]) * (m[k] + m[3 + k]), sum += m[k] + m[3 + k];
         const double js = m2 > 0 && std::isfinite(m2) ? 1.0 - evidence * m[6] / m2 : 0.0;
@@ -247,6 +335,38 @@ private:
         for (int h = 0; h < 2; ++h)
             for (int k = 0; k < 3; ++k) l.add[h][k] = static_cast<float>(std::min(f * m[3 * h + k], 3.0e38));
         out.push_back(l);
+    }
+
+    // G * s over band b, in tiles that some s > 0 reaches.
+    void share_band(int b) {
+        detail::density_sums<1> sums;
+        std::vector<double> m;
+        const double* g[1] = {weights_.g};
+        const int r = detail::density_radius, y0 = b * tile_h, th = std::min(tile_h, h_ - y0);
+        for (int x0 = 0; x0 < w_; x0 += tile_w) {
+            const int tw = std::min(tile_w, w_ - x0);
+            bool any = false;
+            for (int y = std::max(0, y0 - r); y < std::min(h_, y0 + th + r) && !any; ++y)
+                for (int x = std::max(0, x0 - r); x < std::min(w_, x0 + tw + r) && !any; ++x) any = s_->factor[index(x, y)] > 0;
+            if (!any) continue;
+            std::size_t asked = 0;  // taken() is asked at removed pixels only
+            for (int y = y0; y < y0 + th; ++y)
+                for (int x = x0; x < x0 + tw; ++x) asked += s_->removed[index(x, y)] != 0;
+            auto load = [&](int x, int y, double* v) { v[0] = s_->factor[index(x, y)]; };
+            const bool whole = detail::density_sums<1>::whole_tile(asked, tw, th);
+            if (whole) {
+                m.resize(static_cast<std::size_t>(tw) * static_cast<std::size_t>(th));
+                sums.run(w_, h_, x0, y0, tw, th, g, load, m.data());
+            }
+            for (int j = 0; j < th; ++j)
+                for (int i = 0; i < tw; ++i) {
+                    const std::size_t p = index(x0 + i, y0 + j);
+                    if (!s_->removed[p]) continue;
+                    double one = 0;
+                    if (!whole) sums.at(w_, h_, x0 + i, y0 + j, g, load, &one);
+                    s_->share[p] = static_cast<float>(whole ? m[static_cast<std::size_t>(j) * static_cast<std::size_t>(tw) + static_cast<std::size_t>(i)] : one);
+                }
+        }
     }
 
     detail::density_weights weights_;

@@ -264,6 +264,7 @@ public:
                  h.recon.bytes();
         return n + energy_.bytes() + density_.bytes() + density_light_.capacity() * sizeof(density_return::light) +
                (density_excess_[0].capacity() + density_excess_[1].capacity()) * sizeof(float) +
+               (density_entry_[0].capacity() + density_entry_[1].capacity()) * sizeof(std::uint32_t) +
                density_taken_.capacity() * sizeof(double);
     }
 
@@ -1281,21 +1282,32 @@ private:
                         density_.removed[s.fix[e]] = 1;
             }
             if (!d.needed(options_.energy_density_evidence, density_)) return;
-            for (int k = 0; k < 2; ++k)
-                for (std::size_t e = 0; e < halves_[k].fix.size(); ++e)
-                    std::copy_n(&density_excess_[k][e * 3], 3, &density_.excess[k][static_cast<std::size_t>(halves_[k].fix[e]) * 3]);
-            for (int y = 0; y < h; ++y)  // the cleaned halves' level, positive finite parts
-                for (int x = 0; x < w; ++x)
-                    for (int c = 0; c < 3; ++c) {
-                        double l = 0;
-                        for (int k = 0; k < 2; ++k) {
-                            const double v = hb[k]->color.load(x, y, c);
-                            l += std::isfinite(v) && v > 0 ? v : 0.0;
-                        }
-                        density_.level[(static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x)) * 3 +
-                                       static_cast<std::size_t>(c)] = static_cast<float>(std::min(l, static_cast<double>(FLT_MAX)));
+            for (int k = 0; k < 2; ++k) {  // each pixel's list entry, 1 + its index (0: none)
+                density_entry_[k].assign(static_cast<std::size_t>(w) * static_cast<std::size_t>(h), 0);
+                for (std::size_t e = 0; e < halves_[k].fix.size(); ++e) density_entry_[k][halves_[k].fix[e]] = static_cast<std::uint32_t>(e + 1);
+            }
+            auto load = [&](int x, int y, double* v) {  // both halves' excess, |e_A + e_B|^2, the level
+                const std::size_t p = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+                v[6] = v[7] = 0;
+                for (int c = 0; c < 3; ++c) {
+                    double l = 0;  // the cleaned halves' level, positive finite parts
+                    for (int k = 0; k < 2; ++k) {
+                        const std::uint32_t e = density_entry_[k][p];
+                        v[3 * k + c] = e ? density_excess_[k][(e - 1) * 3 + static_cast<std::size_t>(c)] : 0.0f;
+                        const double c_k = hb[k]->color.load(x, y, c);
+                        l += std::isfinite(c_k) && c_k > 0 ? c_k : 0.0;
                     }
-            if (!d.run(options_.energy_density_evidence, density_, density_light_, exec_)) return;
+                    // fused the one way (fused.hpp): a tile's and one pixel's sums both inline it
+                    const double both = v[c] + v[3 + c];
+#ifdef FIREFLY_DETAIL_TARGET_FMA
+                    v[6] = std::fma(both, both, v[6]);
+#else
+                    v[6] += both * both;
+#endif
+                    v[7] += static_cast<float>(std::min(l, static_cast<double>(FLT_MAX)));
+                }
+            };
+            if (!d.run(options_.energy_density_evidence, density_, density_light_, exec_, load)) return;
             for (int k = 0; k < 2; ++k) add_density_light(*hb[k], halves_[k], halves_[1 - k], d, k, *masks[k], totals[k]);
         } else {
             (void)hb, (void)masks, (void)totals;
@@ -1551,6 +1563,7 @@ private:
     density_scratch density_;          // return_energy: the density scale's arrays
     std::vector<density_return::light> density_light_;  // and the light it gives
     std::vector<float> density_excess_[2];  // and each half's removed excess, by list entry
+    std::vector<std::uint32_t> density_entry_[2];  // and each pixel's entry, 1 + its index (0: none)
     std::vector<double> density_taken_;     // and the share f of an entry's excess it gave
     double frame_level_ = 0;           // log of the largest p-value the frame's decision keeps
 };
