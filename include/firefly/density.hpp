@@ -157,6 +157,27 @@ public:
         for (int k = 0; k < N; ++k) out[k] = (rc[k] + cr[k]) * 0.5;
     }
 
+    // use(x, y, sums) at every pixel of the tile where need(x, y): the whole tile's sums
+    // (run) or each needed pixel's alone (at), whichever costs less (the same bits).
+    template <class Load, class Need, class Use>
+    void each(int w, int h, int x0, int y0, int tw, int th, const double* const (&g)[N], Load&& load, Need&& need, Use&& use) {
+        std::size_t needed = 0;
+        for (int y = y0; y < y0 + th; ++y)
+            for (int x = x0; x < x0 + tw; ++x) needed += need(x, y) ? 1 : 0;
+        const bool whole = whole_tile(needed, tw, th);
+        if (whole) {
+            tile_.resize(static_cast<std::size_t>(tw) * static_cast<std::size_t>(th) * N);
+            run(w, h, x0, y0, tw, th, g, load, tile_.data());
+        }
+        double one[N];
+        for (int j = 0; j < th; ++j)
+            for (int i = 0; i < tw; ++i) {
+                if (!need(x0 + i, y0 + j)) continue;
+                if (!whole) at(w, h, x0 + i, y0 + j, g, load, one);
+                use(x0 + i, y0 + j, whole ? &tile_[offset(i, j, tw) * N] : one);
+            }
+    }
+
     // Whether run() costs less than at() for `pixels` of a tile of tw x th: one pixel alone
     // costs about 6 pixels of a whole tile (at 1024x540: 280 and 45 ns a pixel for 8 values;
     // the one value of the shares takes the same rule). Only speed depends on it: the bits
@@ -183,6 +204,7 @@ private:
         return static_cast<std::size_t>(j) * static_cast<std::size_t>(stride) + static_cast<std::size_t>(i);
     }
     std::vector<double> in_, rows_, cols_;  // N planes each
+    std::vector<double> tile_;              // each(): the tile's sums, N per pixel
 };
 
 }  // namespace detail
@@ -294,27 +316,13 @@ private:
     template <class Load>
     void factor_band(int b, double evidence, const Load& load, std::vector<light>& out) {
         detail::density_sums<8> sums;
-        std::vector<double> m;
         const double* g[8] = {weights_.g, weights_.g, weights_.g, weights_.g, weights_.g, weights_.g, weights_.g2, weights_.g};
         const int y0 = b * tile_h, th = std::min(tile_h, h_ - y0);
         for (int x0 = 0; x0 < w_; x0 += tile_w) {
             const int tw = std::min(tile_w, w_ - x0);
             if (!(box_count(x0, y0, x0 + tw, y0 + th) > evidence)) continue;  // no window in it passes
-            std::size_t passing = 0;
-            for (int y = y0; y < y0 + th; ++y)
-                for (int x = x0; x < x0 + tw; ++x) passing += window_count(x, y) > evidence;
-            const bool whole = detail::density_sums<8>::whole_tile(passing, tw, th);
-            if (whole) {
-                m.resize(static_cast<std::size_t>(tw) * static_cast<std::size_t>(th) * 8);
-                sums.run(w_, h_, x0, y0, tw, th, g, load, m.data());
-            }
-            double one[8];
-            for (int j = 0; j < th; ++j)
-                for (int i = 0; i < tw; ++i) {
-                    if (!(window_count(x0 + i, y0 + j) > evidence)) continue;
-                    if (!whole) sums.at(w_, h_, x0 + i, y0 + j, g, load, one);
-                    pixel(x0 + i, y0 + j, evidence, whole ? &m[(static_cast<std::size_t>(j) * static_cast<std::size_t>(tw) + static_cast<std::size_t>(i)) * 8] : one, out);
-                }
+            sums.each(w_, h_, x0, y0, tw, th, g, load, [&](int x, int y) { return window_count(x, y) > evidence; },
+                      [&](int x, int y, const double* m) { pixel(x, y, evidence, m, out); });
         }
         std::sort(out.begin(), out.end(), [](const light& a, const light& c) { return a.pixel < c.pixel; });
     }
@@ -340,7 +348,6 @@ private:
     // G * s over band b, in tiles that some s > 0 reaches.
     void share_band(int b) {
         detail::density_sums<1> sums;
-        std::vector<double> m;
         const double* g[1] = {weights_.g};
         const int r = detail::density_radius, y0 = b * tile_h, th = std::min(tile_h, h_ - y0);
         for (int x0 = 0; x0 < w_; x0 += tile_w) {
@@ -349,23 +356,9 @@ private:
             for (int y = std::max(0, y0 - r); y < std::min(h_, y0 + th + r) && !any; ++y)
                 for (int x = std::max(0, x0 - r); x < std::min(w_, x0 + tw + r) && !any; ++x) any = s_->factor[index(x, y)] > 0;
             if (!any) continue;
-            std::size_t asked = 0;  // taken() is asked at removed pixels only
-            for (int y = y0; y < y0 + th; ++y)
-                for (int x = x0; x < x0 + tw; ++x) asked += s_->removed[index(x, y)] != 0;
-            auto load = [&](int x, int y, double* v) { v[0] = s_->factor[index(x, y)]; };
-            const bool whole = detail::density_sums<1>::whole_tile(asked, tw, th);
-            if (whole) {
-                m.resize(static_cast<std::size_t>(tw) * static_cast<std::size_t>(th));
-                sums.run(w_, h_, x0, y0, tw, th, g, load, m.data());
-            }
-            for (int j = 0; j < th; ++j)
-                for (int i = 0; i < tw; ++i) {
-                    const std::size_t p = index(x0 + i, y0 + j);
-                    if (!s_->removed[p]) continue;
-                    double one = 0;
-                    if (!whole) sums.at(w_, h_, x0 + i, y0 + j, g, load, &one);
-                    s_->share[p] = static_cast<float>(whole ? m[static_cast<std::size_t>(j) * static_cast<std::size_t>(tw) + static_cast<std::size_t>(i)] : one);
-                }
+            sums.each(w_, h_, x0, y0, tw, th, g, [&](int x, int y, double* v) { v[0] = s_->factor[index(x, y)]; },
+                      [&](int x, int y) { return s_->removed[index(x, y)] != 0; },  // where taken() is asked
+                      [&](int x, int y, const double* m) { s_->share[index(x, y)] = static_cast<float>(m[0]); });
         }
     }
 
