@@ -264,8 +264,7 @@ public:
                  h.recon.bytes();
         return n + energy_.bytes() + density_.bytes() + density_light_.capacity() * sizeof(density_return::light) +
                (density_excess_[0].capacity() + density_excess_[1].capacity()) * sizeof(float) +
-               (density_entry_[0].capacity() + density_entry_[1].capacity()) * sizeof(std::uint32_t) +
-               density_taken_.capacity() * sizeof(double);
+               (density_entry_[0].capacity() + density_entry_[1].capacity()) * sizeof(std::uint32_t);
     }
 
     // Cleans both halves in place and reports. mask_a / mask_b (optional, 1 channel, the
@@ -1324,12 +1323,10 @@ private:
         constexpr std::uint8_t kept = highlight_bit | consistent_bit;
         const std::vector<float>& excess = density_excess_[static_cast<std::size_t>(k)];
         auto xy = [w](std::uint32_t i) { return std::pair<int, int>(static_cast<int>(i % static_cast<std::uint32_t>(w)), static_cast<int>(i / static_cast<std::uint32_t>(w))); };
-        std::vector<double>& taken = density_taken_;  // f of each entry with excess, once
-        taken.assign(s.fix.size(), 0.0);
-        for (std::size_t e = 0; e < s.fix.size(); ++e) {
+        auto taken = [&](std::size_t e) {  // the share f of entry e's excess given (0: none removed)
             const float* ex = &excess[e * 3];
-            if (ex[0] > 0 || ex[1] > 0 || ex[2] > 0) taken[e] = d.taken(xy(s.fix[e]).first, xy(s.fix[e]).second);
-        }
+            return ex[0] > 0 || ex[1] > 0 || ex[2] > 0 ? d.taken(xy(s.fix[e]).first, xy(s.fix[e]).second) : 0.0;
+        };
         std::size_t e = 0;  // the list's entry at or after the pixel
         for (const density_return::light& l : density_light_) {
             const std::uint32_t i = l.pixel;
@@ -1340,7 +1337,7 @@ private:
             const bool rebuilt = e < s.fix.size() && s.fix[e] == i;
             for (int c = 0; c < 3; ++c) {
                 add[c] = l.add[k][c];
-                if (rebuilt) add[c] = std::min(add[c], taken[e] * excess[e * 3 + static_cast<std::size_t>(c)]);
+                if (rebuilt) add[c] = std::min(add[c], taken(e) * excess[e * 3 + static_cast<std::size_t>(c)]);
             }
             if (!(add[0] + add[1] + add[2] > 0)) continue;
             if (!add_light(hb.color, x, y, add, old)) {
@@ -1351,7 +1348,7 @@ private:
             if (!mask.empty()) mask(x, y) = static_cast<std::uint8_t>(mask(x, y) | mask_bits::energy);
         }
         for (std::size_t j = 0; j < s.fix.size(); ++j) {
-            const double f = taken[j];
+            const double f = taken(j);
             if (!(f > 0)) continue;  // the list's entry as it was, bit for bit
             const auto [x, y] = xy(s.fix[j]);
             for (int c = 0; c < 3; ++c) {
@@ -1564,7 +1561,6 @@ private:
     std::vector<density_return::light> density_light_;  // and the light it gives
     std::vector<float> density_excess_[2];  // and each half's removed excess, by list entry
     std::vector<std::uint32_t> density_entry_[2];  // and each pixel's entry, 1 + its index (0: none)
-    std::vector<double> density_taken_;     // and the share f of an entry's excess it gave
     double frame_level_ = 0;           // log of the largest p-value the frame's decision keeps
 };
 
