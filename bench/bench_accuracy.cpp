@@ -150,10 +150,10 @@ void add_peer_configs(std::vector<config>& c) {
                  }), {}, false});
 }
 
-// firefly's K-buffer detector (buffers.hpp) at defaults on copies of the K buffers (no
-// variance: the spread of the buffers estimates the noise), then the mean of the cleaned ones.
-buffers_fn firefly_buffers() {
-    return [](const firefly_peers::buffer_list& b, int w, int h, float* out) {
+// firefly's K-buffer detector (buffers.hpp) on copies of the K buffers (no variance: the
+// spread of the buffers estimates the noise), then the mean of the cleaned ones.
+buffers_fn firefly_buffers(cross_buffer_options o = {}) {
+    return [o](const firefly_peers::buffer_list& b, int w, int h, float* out) {
         const std::size_t n = static_cast<std::size_t>(w) * h * 3;
         std::vector<std::vector<float>> copy(b.size());
         std::vector<buffer_view<float>> views;
@@ -161,7 +161,7 @@ buffers_fn firefly_buffers() {
             copy[i].assign(b[i], b[i] + n);
             views.push_back({*make_image_view(copy[i].data(), w, h, 3), {}});
         }
-        cross_buffer_detector d;
+        cross_buffer_detector d(o);
         (void)d.process(views);
         for (std::size_t j = 0; j < n; ++j) {
             double sum = 0;
@@ -175,7 +175,12 @@ buffers_fn firefly_buffers() {
 void add_buffer_configs(std::vector<config>& c, int k) {
     const std::string K = std::to_string(k);
     const bool ds = k > 2;  // at K = 2 their output is the input's: no NL-means column needed
-    if (k >= 4) c.push_back({"firefly_k" + K, {}, firefly_buffers(), ds});  // no variance here
+    if (k >= 4) {  // no variance here
+        c.push_back({"firefly_k" + K, {}, firefly_buffers(), ds});
+        cross_buffer_options density;  // the return's finest scale, off by default here
+        density.energy_density_evidence = 8;
+        c.push_back({"firefly_k" + K + "_density", {}, firefly_buffers(density), false});
+    }
     c.push_back({"mean_k" + K, {}, [](const firefly_peers::buffer_list& b, int w, int h, float* out) {
                      firefly_peers::mean_of_buffers(b, static_cast<std::size_t>(w) * h, out);
                  }, false});

@@ -257,12 +257,15 @@ inline void add_detector_options(CLI::App& app, options& c) {
         ->type_name("X")
         ->check(number_in(0, 0, false, false, "0") | number_in(2, 256, false, false, "a number from 2 to 256"))
         ->group("detector (every mode)");
-    app.add_option("--energy-density-evidence", o.energy_density_evidence,
-                   "the energy return's finest scale: removed light given back where it fell, where more "
-                   "than X equal removed samples of both halves agree (a bokeh disc lit by rare samples; 0: none)")
+    app.add_option_function<double>("--energy-density-evidence",
+                                    [&c](double v) { c.o.energy_density_evidence = c.x.energy_density_evidence = v; },
+                                    "the energy return's finest scale: removed light given back where it fell, where "
+                                    "more than X equal removed samples agree (both halves', or the buffers' pooled; a "
+                                    "bokeh disc lit by rare samples; 0: none; default 8 for two halves, 0 for 3 or more "
+                                    "buffers)")
         ->type_name("X")
         ->check(number_in(0, 0, false, false, "0") | number_in(1, 1e6, false, false, "a number from 1 to 1e6"))
-        ->group(g);
+        ->group("detector (every mode)");
     app.add_option("--bound", o.bound_threshold, "modified Z-score threshold")->type_name("X")->check(number_in(0, 1e30, false, false, "a number >= 0"))->group(g);
     add_choice(app, "--reduction", o.reduction,
                std::map<std::string, firefly::variance_reduction>{{"mean", firefly::variance_reduction::mean},

@@ -627,6 +627,7 @@ json options_json(const options& c) {
         j["find_implausible"] = c.x.find_implausible;
         j["energy_sigma"] = c.x.energy_sigma;
         j["energy_coarse_sigma"] = c.x.energy_coarse_sigma;
+        j["energy_density_evidence"] = c.x.energy_density_evidence;
         j["threads"] = c.threads;
         return j;
     }

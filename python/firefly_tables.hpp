@@ -178,6 +178,7 @@ constexpr void for_each_buffer_option(F&& f) {
     f("return_energy", [](O& o) -> auto& { return o.return_energy; });
     f("energy_sigma", [](O& o) -> auto& { return o.energy_sigma; });
     f("energy_coarse_sigma", [](O& o) -> auto& { return o.energy_coarse_sigma; });
+    f("energy_density_evidence", [](O& o) -> auto& { return o.energy_density_evidence; });
 }
 
 // Every cross_buffer_report field but `pair` (K = 2's frame_report) and `per_buffer` (a list):

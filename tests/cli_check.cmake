@@ -590,13 +590,18 @@ function(check_energy_options name want)
   string(JSON ret GET "${json}" options return_energy)
   string(JSON sg GET "${json}" options energy_sigma)
   string(JSON coarse GET "${json}" options energy_coarse_sigma)
+  string(JSON evidence GET "${json}" options energy_density_evidence)
   string(JSON returned GET "${json}" frames 0 energy_returned)
-  if(NOT ret STREQUAL want OR (want STREQUAL "OFF" AND (NOT sg EQUAL 4 OR NOT returned EQUAL 0 OR NOT coarse EQUAL 16)))
-    message(FATAL_ERROR "${name}: report has return_energy ${ret}, sigma ${sg} / ${coarse}, returned ${returned}")
+  if(NOT ret STREQUAL want OR (want STREQUAL "OFF" AND (NOT sg EQUAL 4 OR NOT returned EQUAL 0 OR NOT coarse EQUAL 16
+                                                        OR NOT evidence EQUAL 3)))
+    message(FATAL_ERROR "${name}: report has return_energy ${ret}, sigma ${sg} / ${coarse}, evidence ${evidence}, returned ${returned}")
   endif()
 endfunction()
-check_energy_options(renders_no_energy OFF --renders ${renders4} -o ${WORK}/noen.exr --no-energy-return --energy-sigma 4 --energy-coarse-sigma 16)
-check_energy_options(halves_no_energy OFF ${A} ${B} -o ${WORK}/noen2.exr --no-energy-return --energy-sigma 4 --energy-coarse-sigma 16)
+check_energy_options(renders_no_energy OFF --renders ${renders4} -o ${WORK}/noen.exr --no-energy-return --energy-sigma 4
+                     --energy-coarse-sigma 16 --energy-density-evidence 3)
+check_energy_options(halves_no_energy OFF ${A} ${B} -o ${WORK}/noen2.exr --no-energy-return --energy-sigma 4
+                     --energy-coarse-sigma 16 --energy-density-evidence 3)
+expect_fail(density_evidence_range "--energy-density-evidence" ${O} --renders ${renders4} -o ${O} --energy-density-evidence 0.5)
 # a bucket written black in half A: found and rebuilt (the report's dropped, the masks' dropped
 # channel), left as it was with --keep-black
 make(black ${A} ${WORK}/black_a.exr 30 20 24)

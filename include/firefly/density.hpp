@@ -32,6 +32,10 @@
 // with the window's 81 taps summed pixel by pixel); at 1024x540, a fresh detector's first two
 // frames of the simulated caustics 198 -> 253 ms, of sparse fireflies a pass of counts.
 //
+// The K-buffer detector (buffers.hpp) runs it on its mean image, each pixel's excess pooled
+// over the buffers as one half's; off by default there (its wider scales' shape already keeps
+// light where fireflies fall densely; buffers.hpp, give_density_back, says what it measured).
+//
 // A pixel gets no density light where either half kept an outlier (a highlight, or one within
 // its noise: it holds its light already), where it is ignored (black, alpha 0), and a rebuilt
 // pixel at most f e of what its rebuild took (the wider scales' cap takes the rest).
@@ -58,6 +62,7 @@
 
 #include "fused.hpp"
 #include "parallel.hpp"
+#include "status.hpp"
 
 namespace firefly {
 namespace detail {
@@ -208,6 +213,13 @@ private:
 };
 
 }  // namespace detail
+
+// The evidence the finest scale asks (energy_density_evidence): 0 (none) or 1 to 1e6 removed
+// pixels' worth.
+inline status check_density_evidence(double evidence) noexcept {
+    if (evidence == 0.0 || (evidence >= 1.0 && evidence <= 1e6)) return ok_status();
+    return status{errc::invalid_argument, "energy_density_evidence must be 0 or lie in [1, 1e6]"};
+}
 
 // Work arrays of the density scale, kept between frames.
 struct density_scratch {

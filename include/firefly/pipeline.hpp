@@ -126,8 +126,7 @@ inline status check_options(const detector_options& o) noexcept {
     if (!(o.energy_sigma >= 1.0 && o.energy_sigma <= 64.0))
         return status{errc::invalid_argument, "energy_sigma must lie in [1, 64]"};
     if (status st = check_energy_coarse(o.energy_coarse_sigma); !st.ok()) return st;
-    if (!(o.energy_density_evidence == 0.0 || (o.energy_density_evidence >= 1.0 && o.energy_density_evidence <= 1e6)))
-        return status{errc::invalid_argument, "energy_density_evidence must be 0 or lie in [1, 1e6]"};
+    if (status st = check_density_evidence(o.energy_density_evidence); !st.ok()) return st;
     return check_reconstruct_options(o.reconstruction);
 }
 

@@ -191,7 +191,7 @@ def test_options_round_trip():
     defaults = firefly.BufferDetector().options
     assert defaults["false_alarm"] == 1e-4 and defaults["pair"] == firefly.Detector().options
     changed = {"alpha": 0.1, "false_alarm": 1e-3, "use_variance": True, "reconstruct": False, "find_dropped": False, "find_implausible": False, "refine_noise": False,
-               "radius": 3, "return_energy": False, "energy_sigma": 4.0, "energy_coarse_sigma": 0.0,
+               "radius": 3, "return_energy": False, "energy_sigma": 4.0, "energy_coarse_sigma": 0.0, "energy_density_evidence": 0.0,
                "pair": dict(firefly.Detector().options, alpha=0.01, rebuild="spatial")}
     assert set(changed) == set(defaults)  # every option is covered here
     det = firefly.BufferDetector(threads=2, **changed)

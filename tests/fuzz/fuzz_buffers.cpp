@@ -213,6 +213,7 @@ void run(FuzzedDataProvider& p) {
     for (const auto& v : views) cviews.push_back({image_view<const T>(v.color), image_view<const T>(v.variance)});
     static cross_buffer_detector serial, threaded(cross_buffer_options{}, executor::threads(2));
     cross_buffer_detector& d = p.ConsumeBool() ? threaded : serial;
+    o.energy_density_evidence = p.ConsumeBool() ? 1.0 : 0.0;  // last: the corpus's inputs read as before
     d.set_options(o);
     const cross_buffer_report dr = d.detect(cviews, dm.views);
     if (!unchanged(s, before)) fail("detect() changed a buffer");

@@ -201,6 +201,7 @@ void run(FuzzedDataProvider& p) {
     // fresh detector per input.
     static detector serial, threaded(detector_options{}, executor::threads(2));
     detector& d = p.ConsumeBool() ? threaded : serial;
+    if (p.ConsumeBool()) o.energy_density_evidence = 1.0;  // last: the corpus's inputs read as before
     d.set_options(o);
     const frame_report r = d.process(hb[0], hb[1], mv[0], mv[1]);
     check_frame(f, nch, s, before, flip, mask, r, finite);
