@@ -1157,7 +1157,7 @@ private:
         if (!d.run(options_.energy_density_evidence, density_, density_light_, exec_, load)) return 0.0;
         double given = 0;
         for (const density_return::light& l : density_light_) {
-            const int x = static_cast<int>(l.pixel % static_cast<std::uint32_t>(w)), y = static_cast<int>(l.pixel / static_cast<std::uint32_t>(w));
+            const int x = detail::column_of(l.pixel, w), y = detail::row_of(l.pixel, w);
             if (untested_[l.pixel]) continue;  // its own fireflies could not be told: none removed
             const double f = d.taken(x, y);    // (0 where nothing was removed)
             double add[3];
@@ -1169,7 +1169,7 @@ private:
         }
         for (std::size_t p = 0; p < density_.removed.size(); ++p) {
             if (!density_.removed[p]) continue;
-            const double f = d.taken(static_cast<int>(p % static_cast<std::size_t>(w)), static_cast<int>(p / static_cast<std::size_t>(w)));
+            const double f = d.taken(detail::column_of(p, w), detail::row_of(p, w));
             for (int c = 0; c < 3; ++c) excess_[p * 3 + static_cast<std::size_t>(c)] *= 1.0 - f;
         }
         return given;

@@ -1115,8 +1115,7 @@ inline void map_rebuilt_excess(const image_view<C>& color, const std::uint32_t* 
         const std::size_t e = entry(j);
         const std::uint32_t p = rebuilt[e];
         if (p >= np || (j + 1 < n && rebuilt[entry(j + 1)] == p)) continue;
-        const int x = static_cast<int>(p % static_cast<std::uint32_t>(w));
-        const int y = static_cast<int>(p / static_cast<std::uint32_t>(w));
+        const int x = detail::column_of(p, w), y = detail::row_of(p, w);
         float f[3];
         if (!rebuilt_excess(color, x, y, &before[e * 3], f)) continue;  // as map_excess: no record
         m.pixels.push_back(excess_at(x, f));

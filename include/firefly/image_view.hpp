@@ -63,6 +63,10 @@ struct pixel_traits {
 // ---------------------------------------------------------------------------------------
 namespace detail {
 
+// The column and row of pixel index i (row-major, without padding) in a frame w wide.
+inline int column_of(std::size_t i, int w) noexcept { return static_cast<int>(i % static_cast<std::size_t>(w)); }
+inline int row_of(std::size_t i, int w) noexcept { return static_cast<int>(i / static_cast<std::size_t>(w)); }
+
 // |a| * b + acc without overflow; false when it would not fit a ptrdiff_t.
 inline bool add_extent(std::ptrdiff_t& acc, std::ptrdiff_t count, std::ptrdiff_t stride) noexcept {
     if (count <= 1) return true;

@@ -745,8 +745,7 @@ private:
         pair_base_.assign(pairs_.size(), 0.0);
         if (!(options_.highlight.min_excess_z > 0)) return;
         for_entries_by_row(pairs_.data(), pairs_.size(), [&](std::size_t j, std::vector<float>& pool) {
-            const int x = static_cast<int>(pairs_[j] % static_cast<std::uint32_t>(w));
-            const int y = static_cast<int>(pairs_[j] / static_cast<std::uint32_t>(w));
+            const int x = detail::column_of(pairs_[j], w), y = detail::row_of(pairs_[j], w);
             const neighbourhood nb = neighbourhood_at(x, y, w, a.color.height(), pool, true);  // both halves'
             for (int h = 0; h < 2; ++h)
                 pair_log_p_[j * 2 + static_cast<std::size_t>(h)] = excess_log_p(hb, h, x, y, cal, nb, true);
@@ -809,8 +808,7 @@ private:
         // 0 no; 1 strict; 2 kept in a cluster, or on one half under the other's firefly
         auto decide_pair = [&](std::size_t j, bool cluster) -> int {
             const std::uint32_t i = pairs_[j];
-            const int x = static_cast<int>(i % static_cast<std::uint32_t>(w));
-            const int y = static_cast<int>(i / static_cast<std::uint32_t>(w));
+            const int x = detail::column_of(i, w), y = detail::row_of(i, w);
             double la = mean_colour(a.color, x, y), lb = mean_colour(b.color, x, y);
             double va = reduced_variance(a.variance, x, y), vb = reduced_variance(b.variance, x, y);
             // A firefly may sit on top of a highlight in one half: that half then exceeds the
@@ -888,8 +886,7 @@ private:
                     const int (&min_pairs)[9], double calibration) const {
         const std::uint8_t* lab[2] = {halves_[0].label.data(), halves_[1].label.data()};
         const int w = a.color.width(), hgt = a.color.height();
-        const int x = static_cast<int>(i % static_cast<std::uint32_t>(w));
-        const int y = static_cast<int>(i / static_cast<std::uint32_t>(w));
+        const int x = detail::column_of(i, w), y = detail::row_of(i, w);
         int neighbours = 0, pairs = 0, strict = 0, fireflies = 0;
         detail::for_each_neighbour(w, hgt, x, y, 1, [&](std::size_t j) {
             strict += (lab[0][j] & strict_bit) != 0;
@@ -917,8 +914,8 @@ private:
         const int h = oa ? 0 : 1;
         if ((lab[h][j] & highlight_bit) || cls(lab[1 - h][j]) == nonfinite_class) return false;
         const half_buffer<C, V, A>* hb[2] = {&a, &b};
-        const std::size_t w = static_cast<std::size_t>(a.color.width());
-        const int x = static_cast<int>(j % w), y = static_cast<int>(j / w);
+        const int w = a.color.width();
+        const int x = detail::column_of(j, w), y = detail::row_of(j, w);
         return exceeds_other_half(options_.highlight, mean_colour(hb[h]->color, x, y),
                                   mean_colour(hb[1 - h]->color, x, y), reduced_variance(hb[1 - h]->variance, x, y),
                                   calibration);
@@ -977,8 +974,7 @@ private:
         // chunks across the executor; then written.
         auto decide = [&](int h, std::uint32_t i, std::vector<float>& pool, double& log_p) -> std::uint8_t {
             if (lab[1 - h][i] & outlier_bit) return 0;  // a pair, decided above
-            const int x = static_cast<int>(i % static_cast<std::uint32_t>(w));
-            const int y = static_cast<int>(i / static_cast<std::uint32_t>(w));
+            const int x = detail::column_of(i, w), y = detail::row_of(i, w);
             if (cls(lab[1 - h][i]) == nonfinite_class) {
                 const double l = mean_colour(hb[h]->color, x, y), v = reduced_variance(hb[h]->variance, x, y);
                 return judges_confidence && is_highlight(options_.highlight, l, l, v, v, cal) ? highlight_bit : 0;
@@ -1239,8 +1235,7 @@ private:
         for_chunks(n, [&](std::size_t e0, std::size_t e1) {
             for (std::size_t e = e0; e < e1; ++e) {
                 const std::uint32_t p = s.fix[e];
-                const int x = static_cast<int>(p % static_cast<std::uint32_t>(w));
-                const int y = static_cast<int>(p / static_cast<std::uint32_t>(w));
+                const int x = detail::column_of(p, w), y = detail::row_of(p, w);
                 if (cls(lo[p]) == nonfinite_class || (lo[p] & fix_bit)) continue;
                 if (!other.alpha.empty() && !(other.alpha.load(x, y) > 0)) continue;
                 (void)detail::cross_half_estimate(hv[0], hv[1], s.recon.kernel_, rep.variance_calibration,
@@ -1274,9 +1269,8 @@ private:
                 const half_state& s = halves_[k];
                 density_excess_[k].assign(s.fix.size() * 3, 0.0f);
                 for (std::size_t e = 0; e < s.fix.size(); ++e)
-                    if (detail::rebuilt_excess(hb[k]->color, static_cast<int>(s.fix[e] % static_cast<std::uint32_t>(w)),
-                                               static_cast<int>(s.fix[e] / static_cast<std::uint32_t>(w)), &s.before[e * 3],
-                                               &density_excess_[k][e * 3]))
+                    if (detail::rebuilt_excess(hb[k]->color, detail::column_of(s.fix[e], w), detail::row_of(s.fix[e], w),
+                                               &s.before[e * 3], &density_excess_[k][e * 3]))
                         density_.removed[s.fix[e]] = 1;
             }
             if (!d.needed(options_.energy_density_evidence, density_)) return;
@@ -1321,7 +1315,7 @@ private:
         const int w = hb.color.width();
         constexpr std::uint8_t kept = highlight_bit | consistent_bit;
         const std::vector<float>& excess = density_excess_[static_cast<std::size_t>(k)];
-        auto xy = [w](std::uint32_t i) { return std::pair<int, int>(static_cast<int>(i % static_cast<std::uint32_t>(w)), static_cast<int>(i / static_cast<std::uint32_t>(w))); };
+        auto xy = [w](std::uint32_t i) { return std::pair<int, int>(detail::column_of(i, w), detail::row_of(i, w)); };
         auto taken = [&](std::size_t e) {  // the share f of entry e's excess given (0: none removed)
             const float* ex = &excess[e * 3];
             return ex[0] > 0 || ex[1] > 0 || ex[2] > 0 ? d.taken(xy(s.fix[e]).first, xy(s.fix[e]).second) : 0.0;
@@ -1373,8 +1367,7 @@ private:
                 continue;
             }
             for (int c = 0; c < nc; ++c) {
-                const double v = hb.color.load(static_cast<int>(s.fix[e] % static_cast<std::uint32_t>(w)),
-                                               static_cast<int>(s.fix[e] / static_cast<std::uint32_t>(w)), c);
+                const double v = hb.color.load(detail::column_of(s.fix[e], w), detail::row_of(s.fix[e], w), c);
                 float f = static_cast<float>(v);
                 if (f > v) f = std::nextafter(f, -HUGE_VALF);  // never above the input (a double view)
                 s.before[e * 3 + static_cast<std::size_t>(c)] = f;
@@ -1434,7 +1427,7 @@ private:
             const bool paired = (o.label[i] & consistent_bit) != 0;
             const bool rose = !paired && (s.label[i] & highlight_bit) && risen != risen_.cend() && risen->first == i;
             if (!paired && !rose) continue;
-            const int x = static_cast<int>(i % static_cast<std::size_t>(w)), y = static_cast<int>(i / static_cast<std::size_t>(w));
+            const int x = detail::column_of(i, w), y = detail::row_of(i, w);
             double v[3], level = 0;
             for (int c = 0; c < 3; ++c) level += (v[c] = hb.color.load(x, y, c)) / 3.0;
             const double rise = rose && level > 0 ? std::max(0.0, 1.0 - risen->second / level) : 0.0;
@@ -1473,8 +1466,7 @@ private:
         if (cross) {
             for (std::size_t e = 0; e < s.cross.size(); ++e) {
                 const std::uint32_t p = s.cross[e];
-                const int x = static_cast<int>(p % static_cast<std::uint32_t>(w));
-                const int y = static_cast<int>(p / static_cast<std::uint32_t>(w));
+                const int x = detail::column_of(p, w), y = detail::row_of(p, w);
                 const double* v = &s.cross_values[e * static_cast<std::size_t>(nc + nv)];
                 for (int c = 0; c < nc; ++c) hb.color.store(x, y, c, v[c]);
                 for (int c = 0; c < nv; ++c) hb.variance.store(x, y, c, v[nc + c]);
@@ -1521,13 +1513,11 @@ private:
                 mask(x, y) = m;
             }
         for (const std::uint32_t p : s.dropped) {  // non-finite to the rebuild, not to the user
-            std::uint8_t& m = mask(static_cast<int>(p % static_cast<std::uint32_t>(w)),
-                                   static_cast<int>(p / static_cast<std::uint32_t>(w)));
+            std::uint8_t& m = mask(detail::column_of(p, w), detail::row_of(p, w));
             m = static_cast<std::uint8_t>((m & ~mask_bits::nonfinite) | mask_bits::dropped);
         }
         for (const std::uint32_t p : s.left) {  // process() only: detect() rebuilds nothing
-            const int x = static_cast<int>(p % static_cast<std::uint32_t>(w));
-            const int y = static_cast<int>(p / static_cast<std::uint32_t>(w));
+            const int x = detail::column_of(p, w), y = detail::row_of(p, w);
             mask(x, y) = static_cast<std::uint8_t>(mask(x, y) | mask_bits::left);
         }
     }

@@ -123,8 +123,7 @@ void mark_roles(const std::uint8_t* mask, std::size_t npix, std::uint8_t interes
 
 // Adds to s.next_ the marked pixels (state `want`) within the kernel of pixel p, once each.
 inline void queue_neighbours(std::size_t p, int w, int h, int r, std::uint8_t want, reconstruct_scratch& s) {
-    const int x = static_cast<int>(p % static_cast<std::size_t>(w));
-    const int y = static_cast<int>(p / static_cast<std::size_t>(w));
+    const int x = detail::column_of(p, w), y = detail::row_of(p, w);
     for (int yy = std::max(0, y - r); yy <= std::min(h - 1, y + r); ++yy)
         for (int xx = std::max(0, x - r); xx <= std::min(w - 1, x + r); ++xx) {
             if (xx == x && yy == y) continue;  // a value depends on its neighbours only
