@@ -1099,11 +1099,8 @@ private:
         auto shape_row = [&](int y, double* row) {
             for (int x = 0; x < w; ++x)
                 for (int c = 0; c < 3; ++c) {
-                    double sum = 0;
-                    for (int i = 0; i < k; ++i) sum += b[i].color.load(x, y, c);
-                    const double m = sum / k;
                     const std::size_t i = index(x, y, w) * 3 + static_cast<std::size_t>(c);
-                    row[static_cast<std::size_t>(x) * 3 + static_cast<std::size_t>(c)] = (std::isfinite(m) && m > 0 ? m : 0.0) + excess_[i];
+                    row[static_cast<std::size_t>(x) * 3 + static_cast<std::size_t>(c)] = positive_mean(b, k, x, y, c) + excess_[i];
                 }
         };
         for (std::size_t i = 0; i < excess_.size(); ++i) rep.energy_removed += excess_[i] / 3.0;
@@ -1148,10 +1145,7 @@ private:
 #else
                 v[6] += v[c] * v[c];
 #endif
-                double sum = 0;
-                for (int i = 0; i < k; ++i) sum += b[i].color.load(x, y, c);
-                const double m = sum / k;
-                v[7] += std::isfinite(m) && m > 0 ? m : 0.0;
+                v[7] += positive_mean(b, k, x, y, c);
             }
         };
         if (!d.run(options_.energy_density_evidence, density_, density_light_, exec_, load)) return 0.0;
@@ -1159,7 +1153,7 @@ private:
         for (const density_return::light& l : density_light_) {
             const int x = detail::column_of(l.pixel, w), y = detail::row_of(l.pixel, w);
             if (untested_[l.pixel]) continue;  // its own fireflies could not be told: none removed
-            const double f = d.taken(x, y);    // (0 where nothing was removed)
+            const double f = d.taken(l.pixel);  // (0 where nothing was removed)
             double add[3];
             for (int c = 0; c < 3; ++c) {
                 add[c] = l.add[0][c];
@@ -1169,10 +1163,19 @@ private:
         }
         for (std::size_t p = 0; p < density_.removed.size(); ++p) {
             if (!density_.removed[p]) continue;
-            const double f = d.taken(detail::column_of(p, w), detail::row_of(p, w));
+            const double f = d.taken(p);
             for (int c = 0; c < 3; ++c) excess_[p * 3 + static_cast<std::size_t>(c)] *= 1.0 - f;
         }
         return given;
+    }
+
+    // The mean of the k buffers' channel c at (x, y) where positive and finite, else 0.
+    template <class C, class V>
+    static double positive_mean(const buffer_view<C, V>* b, int k, int x, int y, int c) {
+        double sum = 0;
+        for (int i = 0; i < k; ++i) sum += b[i].color.load(x, y, c);
+        const double m = sum / k;
+        return std::isfinite(m) && m > 0 ? m : 0.0;
     }
 
     // add (3 channels) to pixel (x, y) of every buffer alike, or to none where a sum does not

@@ -236,7 +236,7 @@ struct density_scratch {
 // prepare()) where either half had excess removed; where needed(), run() lists the light to
 // give each half, reading each pixel's values through the caller's load(x, y, v): v[0..2] and
 // v[3..5] what the rebuild removed from halves A and B (>= 0), v[6] |e_A + e_B|^2 and v[7] the
-// cleaned halves' sum over the channels. taken(x, y) then is the share f of a removed pixel's
+// cleaned halves' sum over the channels. taken(pixel) then is the share f of a removed pixel's
 // excess given.
 class density_return {
 public:
@@ -279,10 +279,10 @@ public:
         return true;
     }
 
-    // The share of pixel (x, y)'s removed excess that the density gave back: sum_p w_pq s(p)
-    // (at a pixel marked removed; 0 elsewhere).
-    double taken(int x, int y) const {
-        return s_ && !s_->share.empty() ? std::min(static_cast<double>(s_->share[index(x, y)]), 1.0) : 0.0;
+    // The share of pixel q's removed excess that the density gave back: sum_p w_pq s(p)
+    // (q the row-major pixel index; at a pixel marked removed, 0 elsewhere).
+    double taken(std::size_t q) const {
+        return s_ && !s_->share.empty() ? std::min(static_cast<double>(s_->share[q]), 1.0) : 0.0;
     }
 
 private:

@@ -1318,7 +1318,7 @@ private:
         auto xy = [w](std::uint32_t i) { return std::pair<int, int>(detail::column_of(i, w), detail::row_of(i, w)); };
         auto taken = [&](std::size_t e) {  // the share f of entry e's excess given (0: none removed)
             const float* ex = &excess[e * 3];
-            return ex[0] > 0 || ex[1] > 0 || ex[2] > 0 ? d.taken(xy(s.fix[e]).first, xy(s.fix[e]).second) : 0.0;
+            return ex[0] > 0 || ex[1] > 0 || ex[2] > 0 ? d.taken(s.fix[e]) : 0.0;
         };
         std::size_t e = 0;  // the list's entry at or after the pixel
         for (const density_return::light& l : density_light_) {
@@ -1328,9 +1328,10 @@ private:
             const auto [x, y] = xy(i);
             double add[3], old[3];
             const bool rebuilt = e < s.fix.size() && s.fix[e] == i;
+            const double f = rebuilt ? taken(e) : 0.0;
             for (int c = 0; c < 3; ++c) {
                 add[c] = l.add[k][c];
-                if (rebuilt) add[c] = std::min(add[c], taken(e) * excess[e * 3 + static_cast<std::size_t>(c)]);
+                if (rebuilt) add[c] = std::min(add[c], f * excess[e * 3 + static_cast<std::size_t>(c)]);
             }
             if (!(add[0] + add[1] + add[2] > 0)) continue;
             if (!add_light(hb.color, x, y, add, old)) {
