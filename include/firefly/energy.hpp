@@ -12,8 +12,9 @@
 // that arrives along rare paths lands where the image is bright, in proportion). With e the
 // removed excess per pixel and channel, P the 3x3 median of the image the caller gives (the
 // K-buffer detector gives the input's mean: the median drops lone fireflies and keeps where
-// they fall densely, as in a caustic lit mostly by them), G a Gaussian of sigma pixels
-// (normalised weights w):
+// they fall densely, as in a caustic lit mostly by them; two halves take the median twice,
+// which drops windows where fireflies crowd by chance: shape_profile), G a Gaussian of sigma
+// pixels (normalised weights w):
 //     M = G * e,  L = G * P,  ratio = min(M / L, 1),  returned(p) = s(p) ratio(p) P(p)
 // s is the positive-part James-Stein factor of M: V = sum_q w_q^2 e_q^2 (channel sums) is the
 // variance M would have if each e_q were one draw of a sparse process, so
@@ -345,8 +346,9 @@ struct excess_map {
 // Work arrays of the energy return, kept between frames. Frame-sized: the profile; the rest is
 // per node, per row or per excess pixel.
 struct energy_scratch {
-    std::vector<float> profile;         // the shape's 3x3 median, full frame (float: half the
-                                        // memory; every sum is taken in double)
+    std::vector<float> profile;         // the shape's 3x3 median (two halves: taken twice), full
+                                        // frame (float: half the memory; every sum is in double)
+    std::vector<float> first_median;    // two halves: the first of those medians
     std::vector<double> xy;             // the nodes' records, in sum_order_for's order (square
                                         // frames: x first, then the mean of both orders)
     std::vector<double> factor;         // the nodes: the return's share of the profile, 3
@@ -358,7 +360,7 @@ struct energy_scratch {
     double coarse_var_scale = 0;        // sum w_fine^2 / sum w_coarse^2 (per pixel weights)
     detail::excess_map where;           // the excess pixels
     std::size_t bytes() const noexcept {
-        return profile.capacity() * sizeof(float) + where.bytes() +
+        return (profile.capacity() + first_median.capacity()) * sizeof(float) + where.bytes() +
                (xy.capacity() + factor.capacity() + cells.capacity() + coarse.capacity()) * sizeof(double) +
                row_returned.capacity() * sizeof(double) + order.capacity() * sizeof(std::uint32_t);
     }
@@ -912,20 +914,55 @@ inline void coarse_model(const excess_map& where, int w, int h,
     s.coarse_var_scale = (fine2 * fine2) / (coarse2 * coarse2);
 }
 
-// The model of the energy return for one frame, from the removed excess already in s.where
-// (see excess_map) and the image whose 3x3 median shapes the return (3 channels, finite,
-// >= 0; row y written by shape_rows(y, out)): the profile and the nodes' factors in `s`, read
-// back per pixel by energy_at. sc: the Gaussians' widths in pixels.
+// The return's shape P: the 3x3 median of the caller's image, once or twice (twice: the
+// half-buffer detector). One median drops a lone firefly, but where fireflies are dense a
+// window holds 5 of 9 by chance (at 19% of pixels hit, 0.6% of windows; at 30% a half, 10%) and
+// its median is a firefly's level, which the return then paints at ratio times that level. The
+// second median drops such chance clusters (a few pixels, ragged) and keeps what the first kept
+// over 3x3 (a streak two pixels wide or more, a spot's core). Measured, relMSE, once against
+// twice, two halves (the simulator at 1024x540): dense30 0.0756 -> 0.0594, dense10 0.0235 ->
+// 0.0203, production 0.00344 -> 0.00320, fine detail 0.00307 -> 0.00287, caustics 0.0314 ->
+// 0.0309, the rest within 0.3%; 36 held-out frames (bench/research/held_out.cpp): 34 lower or
+// equal, two caustics frames +0.2% at most. Its price is on small caustic spots: the Cycles
+// caustics 0.02449 -> 0.02482 (a focus a few pixels wide loses its core to the second pass; after
+// NL-means 0.0210 -> 0.0213), while the Cycles interior 0.1111 -> 0.1108 and the bokeh render at 8
+// samples a half 0.0289 -> 0.0287. Once for K buffers: there the second median took dense10 at 128
+// samples (512x270, 3 seeds) 0.0519 -> 0.0295 (K = 8) and 0.0878 -> 0.0626 (K = 4), but where
+// light itself is sparse (K = 8 at one sample a buffer, 5% of samples lit: 34% of pixels lit, the
+// median a chance too) the shape falls to nothing, the return's cap (ratio <= 1) binds, and the
+// frame kept 0.85 of its light against 0.93 (0.90 with the first median kept where the second is
+// 0; 0.88 with the larger of the second and the cleaned mean's median, which also lost the
+// production gain). Twice costs a second pass over the frame and its first pass's copy (12
+// bytes a pixel, kept).
 template <class ShapeRows>
-inline void energy_model_mapped(ShapeRows&& shape_rows, int w, int h, energy_scales sc, energy_scratch& s,
-                                const executor& exec) {
+inline void shape_profile(ShapeRows&& shape_rows, bool twice, int w, int h, energy_scratch& s, const executor& exec) {
+    if (!twice) {
+        median3x3_rows(shape_rows, s.profile, w, h, exec);
+        return;
+    }
+    median3x3_rows(shape_rows, s.first_median, w, h, exec);
+    const std::size_t n = static_cast<std::size_t>(w) * 3;
+    median3x3_rows([&](int y, double* row) {
+                       const float* in = &s.first_median[static_cast<std::size_t>(y) * n];
+                       for (std::size_t i = 0; i < n; ++i) row[i] = in[i];
+                   },
+                   s.profile, w, h, exec);
+}
+
+// The model of the energy return for one frame, from the removed excess already in s.where
+// (see excess_map) and the image whose 3x3 median (median_twice: of its 3x3 median) shapes the
+// return (3 channels, finite, >= 0; row y written by shape_rows(y, out)): the profile and the
+// nodes' factors in `s`, read back per pixel by energy_at. sc: the Gaussians' widths in pixels.
+template <class ShapeRows>
+inline void energy_model_mapped(ShapeRows&& shape_rows, bool median_twice, int w, int h, energy_scales sc,
+                                energy_scratch& s, const executor& exec) {
     const double sigma = sc.fine;
     const int r = std::max(1, static_cast<int>(std::ceil(3.0 * sigma)));
     const tap_weights taps[2] = {make_taps(sigma, r, false), make_taps(sigma, r, true)};
     const int step = node_step(sigma);
     s.ax = make_node_axis(w, step);
     s.ay = make_node_axis(h, step);
-    median3x3_rows(shape_rows, s.profile, w, h, exec);
+    shape_profile(shape_rows, median_twice, w, h, s, exec);
     const sum_order order = sum_order_for(w, h);
     if (order != sum_order::y_first) energy_x_then_y(s.profile, s.where, w, h, s.ax, s.ay, taps, s, exec);
     if (order != sum_order::x_first)
@@ -941,7 +978,7 @@ template <class E, class ShapeRows>
 inline void energy_model_rows(const std::vector<E>& excess, ShapeRows&& shape_rows, int w, int h, energy_scales sc,
                               energy_scratch& s, const executor& exec) {
     detail::map_excess(excess, w, h, s.where, exec);
-    detail::energy_model_mapped(shape_rows, w, h, sc, s, exec);
+    detail::energy_model_mapped(shape_rows, false, w, h, sc, s, exec);
 }
 
 inline void energy_model(const std::vector<double>& excess, const std::vector<double>& shape, int w, int h,
@@ -1157,7 +1194,8 @@ energy_totals return_energy_to_image(const image_view<C>& color, const std::uint
     const int w = color.width(), h = color.height();
     if (color.channels() < 3) return t;
     detail::map_rebuilt_excess(color, rebuilt, before, n, s.where, s.order);
-    // the shape: the image before the rebuild (the cleaned image plus what was removed)
+    // the shape: the image before the rebuild (the cleaned image plus what was removed), its
+    // 3x3 median taken twice (shape_profile)
     auto shape_row = [&](int y, double* row) {
         auto put = [&](int x, int c, double v) {
             row[static_cast<std::size_t>(x) * 3 + static_cast<std::size_t>(c)] = std::isfinite(v) && v > 0 ? v : 0.0;
@@ -1167,7 +1205,7 @@ energy_totals return_energy_to_image(const image_view<C>& color, const std::uint
         for (const detail::excess_pixel* e = s.where.first(y); e != s.where.last(y); ++e)
             for (int c = 0; c < 3; ++c) put(e->x, c, color.load(e->x, y, c) + e->v[c]);
     };
-    detail::energy_model_mapped(shape_row, w, h, sigma, s, exec);
+    detail::energy_model_mapped(shape_row, true, w, h, sigma, s, exec);
     // row-major, as over every pixel: the others' excess is +0 and adds nothing (excess_map)
     for (const detail::excess_pixel& e : s.where.pixels) t.removed += (e.v[0] + e.v[1] + e.v[2]) / 3.0;
     // bands of rows across the executor (distinct pixels); each row's total kept, summed in
