@@ -915,25 +915,25 @@ inline void coarse_model(const excess_map& where, int w, int h,
 }
 
 // The return's shape P: the 3x3 median of the caller's image, once or twice (twice: the
-// half-buffer detector). One median drops a lone firefly, but where fireflies are dense a
-// window holds 5 of 9 by chance (at 19% of pixels hit, 0.6% of windows; at 30% a half, 10%) and
-// its median is a firefly's level, which the return then paints at ratio times that level. The
+// half-buffer detector). One median drops a lone firefly, but where fireflies are dense a window
+// holds 5 of 9 by chance (at 19% of pixels hit, 0.6% of windows; at 30% a half, 10%) and its
+// median is a firefly's level, which the return then paints at ratio times that level. The
 // second median drops such chance clusters (a few pixels, ragged) and keeps what the first kept
 // over 3x3 (a streak two pixels wide or more, a spot's core). Measured, relMSE, once against
 // twice, two halves (the simulator at 1024x540): dense30 0.0756 -> 0.0594, dense10 0.0235 ->
 // 0.0203, production 0.00344 -> 0.00320, fine detail 0.00307 -> 0.00287, caustics 0.0314 ->
-// 0.0309, the rest within 0.3%; 36 held-out frames (bench/research/held_out.cpp): 34 lower or
-// equal, two caustics frames +0.2% at most. Its price is on small caustic spots: the Cycles
-// caustics 0.02449 -> 0.02482 (a focus a few pixels wide loses its core to the second pass; after
-// NL-means 0.0210 -> 0.0213), while the Cycles interior 0.1111 -> 0.1108 and the bokeh render at 8
-// samples a half 0.0289 -> 0.0287. Once for K buffers: there the second median took dense10 at 128
-// samples (512x270, 3 seeds) 0.0519 -> 0.0295 (K = 8) and 0.0878 -> 0.0626 (K = 4), but where
-// light itself is sparse (K = 8 at one sample a buffer, 5% of samples lit: 34% of pixels lit, the
-// median a chance too) the shape falls to nothing, the return's cap (ratio <= 1) binds, and the
-// frame kept 0.85 of its light against 0.93 (0.90 with the first median kept where the second is
-// 0; 0.88 with the larger of the second and the cleaned mean's median, which also lost the
-// production gain). Twice costs a second pass over the frame and its first pass's copy (12
-// bytes a pixel, kept).
+// 0.0309 (at 512x270, thinner streaks: 0.0554 -> 0.0573), the rest within 0.3%; 36 held-out
+// frames (bench/research/held_out.cpp): 34 lower or equal, two caustics frames +0.2% at most.
+// Its price is on small caustic spots: the Cycles caustics 0.02449 -> 0.02482 (a focus a few
+// pixels wide loses its core to the second pass; after NL-means 0.0210 -> 0.0213), while the
+// Cycles interior 0.1111 -> 0.1108 and the bokeh render at 8 samples a half 0.0289 -> 0.0287.
+// Once for K buffers: there the second median took dense10 at 128 samples (512x270, 3 seeds)
+// 0.0519 -> 0.0295 (K = 8) and 0.0878 -> 0.0626 (K = 4), but where light itself is sparse (K = 8
+// at one sample a buffer, 5% of samples lit: 34% of pixels lit, the median a chance too) the
+// shape falls to nothing, the return's cap (ratio <= 1) binds, and the frame kept 0.85 of its
+// light against 0.93 (0.90 with the first median kept where the second is 0; 0.88 with the
+// larger of the second and the cleaned mean's median, which also lost the production gain).
+// Twice costs a second pass over the frame and its first pass's copy (12 bytes a pixel, kept).
 template <class ShapeRows>
 inline void shape_profile(ShapeRows&& shape_rows, bool twice, int w, int h, energy_scratch& s, const executor& exec) {
     if (!twice) {
