@@ -934,9 +934,11 @@ inline void coarse_model(const excess_map& where, int w, int h,
 // light against 0.93 (0.90 with the first median kept where the second is 0; 0.88 with the
 // larger of the second and the cleaned mean's median, which also lost the production gain).
 // Twice costs a second pass over the frame and its first pass's copy (12 bytes a pixel, kept).
+enum class shape_medians : unsigned char { once, twice };
 template <class ShapeRows>
-inline void shape_profile(ShapeRows&& shape_rows, bool twice, int w, int h, energy_scratch& s, const executor& exec) {
-    if (!twice) {
+inline void shape_profile(ShapeRows&& shape_rows, shape_medians medians, int w, int h, energy_scratch& s,
+                          const executor& exec) {
+    if (medians == shape_medians::once) {
         median3x3_rows(shape_rows, s.profile, w, h, exec);
         return;
     }
@@ -950,11 +952,12 @@ inline void shape_profile(ShapeRows&& shape_rows, bool twice, int w, int h, ener
 }
 
 // The model of the energy return for one frame, from the removed excess already in s.where
-// (see excess_map) and the image whose 3x3 median (median_twice: of its 3x3 median) shapes the
-// return (3 channels, finite, >= 0; row y written by shape_rows(y, out)): the profile and the
-// nodes' factors in `s`, read back per pixel by energy_at. sc: the Gaussians' widths in pixels.
+// (see excess_map) and the image whose 3x3 median (shape_medians::twice: of its 3x3 median)
+// shapes the return (3 channels, finite, >= 0; row y written by shape_rows(y, out)): the profile
+// and the nodes' factors in `s`, read back per pixel by energy_at. sc: the Gaussians' widths in
+// pixels.
 template <class ShapeRows>
-inline void energy_model_mapped(ShapeRows&& shape_rows, bool median_twice, int w, int h, energy_scales sc,
+inline void energy_model_mapped(ShapeRows&& shape_rows, shape_medians medians, int w, int h, energy_scales sc,
                                 energy_scratch& s, const executor& exec) {
     const double sigma = sc.fine;
     const int r = std::max(1, static_cast<int>(std::ceil(3.0 * sigma)));
@@ -962,7 +965,7 @@ inline void energy_model_mapped(ShapeRows&& shape_rows, bool median_twice, int w
     const int step = node_step(sigma);
     s.ax = make_node_axis(w, step);
     s.ay = make_node_axis(h, step);
-    shape_profile(shape_rows, median_twice, w, h, s, exec);
+    shape_profile(shape_rows, medians, w, h, s, exec);
     const sum_order order = sum_order_for(w, h);
     if (order != sum_order::y_first) energy_x_then_y(s.profile, s.where, w, h, s.ax, s.ay, taps, s, exec);
     if (order != sum_order::x_first)
@@ -978,7 +981,7 @@ template <class E, class ShapeRows>
 inline void energy_model_rows(const std::vector<E>& excess, ShapeRows&& shape_rows, int w, int h, energy_scales sc,
                               energy_scratch& s, const executor& exec) {
     detail::map_excess(excess, w, h, s.where, exec);
-    detail::energy_model_mapped(shape_rows, false, w, h, sc, s, exec);
+    detail::energy_model_mapped(shape_rows, detail::shape_medians::once, w, h, sc, s, exec);
 }
 
 inline void energy_model(const std::vector<double>& excess, const std::vector<double>& shape, int w, int h,
@@ -1205,7 +1208,7 @@ energy_totals return_energy_to_image(const image_view<C>& color, const std::uint
         for (const detail::excess_pixel* e = s.where.first(y); e != s.where.last(y); ++e)
             for (int c = 0; c < 3; ++c) put(e->x, c, color.load(e->x, y, c) + e->v[c]);
     };
-    detail::energy_model_mapped(shape_row, true, w, h, sigma, s, exec);
+    detail::energy_model_mapped(shape_row, detail::shape_medians::twice, w, h, sigma, s, exec);
     // row-major, as over every pixel: the others' excess is +0 and adds nothing (excess_map)
     for (const detail::excess_pixel& e : s.where.pixels) t.removed += (e.v[0] + e.v[1] + e.v[2]) / 3.0;
     // bands of rows across the executor (distinct pixels); each row's total kept, summed in
