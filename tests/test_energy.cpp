@@ -82,6 +82,32 @@ TEST_CASE("energy return: the 3x3 median is the median of the 9 (of the pixels i
     }
 }
 
+TEST_CASE("energy return: the median taken twice in one pass is the float median of the float median", "[energy]") {
+    // median3x3_twice_rows makes the first median's rows as the second asks for them, across
+    // bands of 16 rows (heights past 16 and 32 cross them) and threads: the bits of two passes
+    // with the first kept as a float frame
+    std::mt19937 rng(11);
+    for (const int h : {1, 2, 3, 15, 16, 17, 33, 40})
+        for (const int w : {1, 2, 7}) {
+            const std::size_t n = static_cast<std::size_t>(w * h) * 3;
+            std::vector<double> in(n), first;
+            for (double& v : in) v = static_cast<double>(rng() % 7) * (rng() % 4 ? 1.0 : 0.3) + (rng() % 9 ? 0.0 : 1e-310);
+            std::vector<float> once_kept, expect, got;
+            detail::median3x3_rows([&](int y, double* row) { std::copy_n(&in[static_cast<std::size_t>(y * w) * 3], w * 3, row); },
+                                   once_kept, w, h, executor{});
+            detail::median3x3_rows([&](int y, double* row) {
+                                       for (int i = 0; i < w * 3; ++i) row[i] = once_kept[static_cast<std::size_t>(y * w * 3 + i)];
+                                   },
+                                   expect, w, h, executor{});
+            for (const executor& ex : {executor{}, executor::threads(2), executor::threads(3)}) {
+                detail::median3x3_twice_rows(
+                    [&](int y, double* row) { std::copy_n(&in[static_cast<std::size_t>(y * w) * 3], w * 3, row); }, got, w, h,
+                    ex);
+                CHECK(std::memcmp(got.data(), expect.data(), n * sizeof(float)) == 0);
+            }
+        }
+}
+
 namespace {
 // A frame of clustered removed excess (a caustic-like patch and scattered fireflies) over a
 // noisy shape, for the checks against the model summed directly.

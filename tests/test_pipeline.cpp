@@ -523,10 +523,10 @@ TEST_CASE("one thread and two threads give bit-identical outputs", "[pipeline][i
                         for (std::size_t i = n; i-- > 0;) t(i);  // reverse order on purpose
                     }));
     (void)hooked.process(c.h[0], c.h[1]);
-    CHECK(calls == 23);  // the implausible values' row bands, candidates, the lone blacks of
+    CHECK(calls == 21);  // the implausible values' row bands, candidates, the lone blacks of
                          // the dropped test (the frame has black pixels), the local test (levels, bands of rows), what to rebuild,
                          // the other half's estimates, the colour before the rebuild, the
-                         // writes; per half, the energy return's two medians, node rows (y first:
+                         // writes; per half, the energy return's shape (both medians in one pass), node rows (y first:
                          // the frame is wider than high), the coarse scale's cell sums and its
                          // Gaussian's two passes, the return's rows (runs of one task run
                          // inline, unhooked)

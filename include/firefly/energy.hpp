@@ -237,66 +237,120 @@ inline void median3x3_interior(const M* up, const M* here, const M* down, std::s
     }
 }
 
-// 3x3 median of each of 3 interleaved channels of a w x h image whose rows `fill_row(y, out)`
-// writes (3 w finite values) into `out` (the frame's edge: the pixels inside it, the mean of
-// the middle two where they are even in number; inside it median3x3_interior). Rows are made
-// as needed: no frame-sized copy of the input. Inside the frame the values are first taken to
-// T (held at T's largest): rounding is monotone, so the median of the rounded values is the
-// rounded median, and a float profile is selected in float lanes (twice as many a register).
-// A zero comes out +0 (-0 and a positive double below float's least denormal both round to a
-// zero of T, and a selection among tied zeros could return either sign).
-template <class T, class FillRow>
-inline void median3x3_rows(FillRow&& fill_row, std::vector<T>& out, int w, int h, const executor& exec) {
-    // a median past the range of T (a float profile of a 2 FLT_MAX sum) is kept at its largest;
-    // + 0 makes a zero +0
-    auto largest = [](double v) { return std::min(v, static_cast<double>(std::numeric_limits<T>::max())); };
-    auto put = [&](double v) { return static_cast<T>(static_cast<T>(largest(v)) + T(0)); };
-    const std::size_t n = static_cast<std::size_t>(w) * 3;
-    out.resize(n * static_cast<std::size_t>(h));
-    // Bands of rows as tasks; in a band each input row is made once, into a ring of three
-    // (per thread, kept: a row's allocation freed and taken again costs page faults when the
-    // allocator returns it to the system), as double (the edges) and as T (the interior).
+// The 3x3 medians of a w x h image (3 interleaved channels) row by row, from input rows that
+// `fill_row(y, out)` writes (3 w finite values) into `out` as they are needed: a ring of the
+// last three input rows, made once each while rows are asked for in order (a row not in the
+// ring is made again: ask in order). At the frame's edge the median of the pixels inside it,
+// the mean of the middle two where they are even in number; inside it median3x3_interior.
+// Inside the frame the values are first taken to T (held at T's largest): rounding is
+// monotone, so the median of the rounded values is the rounded median, and a float profile is
+// selected in float lanes (twice as many a register). A zero comes out +0 (-0 and a positive
+// double below float's least denormal both round to a zero of T, and a selection among tied
+// zeros could return either sign).
+template <class T>
+class median3x3_stream {
+public:
+    // Starts a pass over a w x h image: no row is held.
+    void begin(int w, int h) {
+        w_ = w, h_ = h, n_ = static_cast<std::size_t>(w) * 3;
+        ring_.resize(3 * n_), ring_t_.resize(3 * n_), lo_.resize(n_), mid_.resize(n_), hi_.resize(n_);
+        held_[0] = held_[1] = held_[2] = -1;
+    }
+    // Row y of the medians into o (3 w values).
+    template <class FillRow>
+    void row(int y, FillRow&& fill_row, T* o) {
+        const int y0 = std::max(0, y - 1), y1 = std::min(h_ - 1, y + 1);
+        for (int yy = y0; yy <= y1; ++yy) make(yy, fill_row);
+        if (y == 0 || y == h_ - 1 || w_ < 3) {
+            for (int x = 0; x < w_; ++x)
+                for (int c = 0; c < 3; ++c) o[static_cast<std::size_t>(x) * 3 + static_cast<std::size_t>(c)] = put(edge(y, x, c));
+            return;
+        }
+        median3x3_interior(line_t(y - 1), line_t(y), line_t(y + 1), n_, lo_.data(), mid_.data(), hi_.data(), o);
+        for (int c = 0; c < 3; ++c) {
+            o[c] = put(edge(y, 0, c));
+            o[static_cast<std::size_t>(w_ - 1) * 3 + static_cast<std::size_t>(c)] = put(edge(y, w_ - 1, c));
+        }
+    }
+
+private:
+    // a median past the range of T (a float profile of a 2 FLT_MAX sum) is kept at its
+    // largest; + 0 makes a zero +0
+    static T put(double v) {
+        return static_cast<T>(static_cast<T>(std::min(v, static_cast<double>(std::numeric_limits<T>::max()))) + T(0));
+    }
+    double* line(int yy) { return &ring_[static_cast<std::size_t>(yy % 3) * n_]; }
+    T* line_t(int yy) { return &ring_t_[static_cast<std::size_t>(yy % 3) * n_]; }
+    template <class FillRow>
+    void make(int yy, FillRow& fill_row) {  // (a double image's T ring is a copy with zeros made +0)
+        if (held_[yy % 3] == yy) return;
+        double* r = line(yy);
+        fill_row(yy, r);
+        T* t = line_t(yy);
+        for (std::size_t i = 0; i < n_; ++i) t[i] = put(r[i]);
+        held_[yy % 3] = yy;
+    }
+    double edge(int y, int x, int c) {
+        double t[9] = {};
+        int k = 0;
+        for (int yy = std::max(0, y - 1); yy <= std::min(h_ - 1, y + 1); ++yy)
+            for (int xx = std::max(0, x - 1); xx <= std::min(w_ - 1, x + 1); ++xx)
+                t[k++] = line(yy)[static_cast<std::size_t>(xx) * 3 + static_cast<std::size_t>(c)];
+        std::nth_element(t, t + k / 2, t + k);
+        double m = t[k / 2];
+        if (k % 2 == 0) m = 0.5 * (m + *std::max_element(t, t + k / 2));  // mean of the middle two
+        return m;
+    }
+    int w_ = 0, h_ = 0;
+    std::size_t n_ = 0;
+    int held_[3] = {-1, -1, -1};  // the input row each ring slot holds
+    std::vector<double> ring_;    // as double (the edges) and as T (the interior)
+    std::vector<T> ring_t_, lo_, mid_, hi_;
+};
+
+// Bands of rows as tasks: body(first, last) for each band of 16 rows. The callers take each
+// band's rows in order through a median3x3_stream per thread (kept: a row's allocation freed
+// and taken again costs page faults when the allocator returns it to the system), started at
+// the band.
+template <class Body>
+inline void for_each_band_in_order(int h, const executor& exec, Body&& body) {
     constexpr int band = 16;
     exec.run(static_cast<std::size_t>((h + band - 1) / band), [&](std::size_t bi) {
-        thread_local std::vector<double> ring;
-        thread_local std::vector<T> ring_t, lo, mid, hi;
-        ring.resize(3 * n), ring_t.resize(3 * n), lo.resize(n), mid.resize(n), hi.resize(n);
-        auto line = [&](int yy) { return &ring[static_cast<std::size_t>(yy % 3) * n]; };
-        auto line_t = [&](int yy) { return &ring_t[static_cast<std::size_t>(yy % 3) * n]; };
-        auto make = [&](int yy) {  // (a double image's T ring is a copy with zeros made +0)
-            double* r = line(yy);
-            fill_row(yy, r);
-            T* t = line_t(yy);
-            for (std::size_t i = 0; i < n; ++i) t[i] = put(r[i]);
+        const int first = static_cast<int>(bi) * band;
+        body(first, std::min(h, first + band));
+    });
+}
+
+// 3x3 median of each of 3 interleaved channels of a w x h image whose rows `fill_row(y, out)`
+// writes (3 w finite values) into `out` (median3x3_stream): no frame-sized copy of the input.
+template <class T, class FillRow>
+inline void median3x3_rows(FillRow&& fill_row, std::vector<T>& out, int w, int h, const executor& exec) {
+    const std::size_t n = static_cast<std::size_t>(w) * 3;
+    out.resize(n * static_cast<std::size_t>(h));
+    for_each_band_in_order(h, exec, [&](int first, int last) {
+        thread_local median3x3_stream<T> stream;
+        stream.begin(w, h);
+        for (int y = first; y < last; ++y) stream.row(y, fill_row, &out[static_cast<std::size_t>(y) * n]);
+    });
+}
+
+// The 3x3 median of the 3x3 median, the same way: the first median's rows made as the second
+// asks for them (a band's first and last row take two of its rows more), in T as a frame of
+// the first median would hold them; nothing frame-sized but `out`.
+template <class T, class FillRow>
+inline void median3x3_twice_rows(FillRow&& fill_row, std::vector<T>& out, int w, int h, const executor& exec) {
+    const std::size_t n = static_cast<std::size_t>(w) * 3;
+    out.resize(n * static_cast<std::size_t>(h));
+    for_each_band_in_order(h, exec, [&](int first, int last) {
+        thread_local median3x3_stream<T> once, twice;
+        thread_local std::vector<T> row_once;
+        once.begin(w, h), twice.begin(w, h);
+        row_once.resize(n);
+        auto first_median = [&](int y, double* row) {
+            once.row(y, fill_row, row_once.data());
+            for (std::size_t i = 0; i < n; ++i) row[i] = row_once[i];
         };
-        const int first = static_cast<int>(bi) * band, last = std::min(h, first + band);
-        for (int yy = std::max(0, first - 1); yy <= std::min(h - 1, first); ++yy) make(yy);
-        for (int y = first; y < last; ++y) {
-            if (y + 1 < h) make(y + 1);
-            const int y0 = std::max(0, y - 1), y1 = std::min(h - 1, y + 1);
-            T* o = &out[static_cast<std::size_t>(y) * n];
-            auto edge = [&](int x, int c) {
-                double t[9] = {};
-                int k = 0;
-                for (int yy = y0; yy <= y1; ++yy)
-                    for (int xx = std::max(0, x - 1); xx <= std::min(w - 1, x + 1); ++xx)
-                        t[k++] = line(yy)[static_cast<std::size_t>(xx) * 3 + static_cast<std::size_t>(c)];
-                std::nth_element(t, t + k / 2, t + k);
-                double m = t[k / 2];
-                if (k % 2 == 0) m = 0.5 * (m + *std::max_element(t, t + k / 2));  // mean of the middle two
-                return m;
-            };
-            if (y == 0 || y == h - 1 || w < 3) {
-                for (int x = 0; x < w; ++x)
-                    for (int c = 0; c < 3; ++c) o[static_cast<std::size_t>(x) * 3 + static_cast<std::size_t>(c)] = put(edge(x, c));
-                continue;
-            }
-            median3x3_interior(line_t(y - 1), line_t(y), line_t(y + 1), n, lo.data(), mid.data(), hi.data(), o);
-            for (int c = 0; c < 3; ++c) {
-                o[c] = put(edge(0, c));
-                o[static_cast<std::size_t>(w - 1) * 3 + static_cast<std::size_t>(c)] = put(edge(w - 1, c));
-            }
-        }
+        for (int y = first; y < last; ++y) twice.row(y, first_median, &out[static_cast<std::size_t>(y) * n]);
     });
 }
 
@@ -348,7 +402,6 @@ struct excess_map {
 struct energy_scratch {
     std::vector<float> profile;         // the shape's 3x3 median (two halves: taken twice), full
                                         // frame (float: half the memory; every sum is in double)
-    std::vector<float> first_median;    // two halves: the first of those medians
     std::vector<double> xy;             // the nodes' records, in sum_order_for's order (square
                                         // frames: x first, then the mean of both orders)
     std::vector<double> factor;         // the nodes: the return's share of the profile, 3
@@ -360,7 +413,7 @@ struct energy_scratch {
     double coarse_var_scale = 0;        // sum w_fine^2 / sum w_coarse^2 (per pixel weights)
     detail::excess_map where;           // the excess pixels
     std::size_t bytes() const noexcept {
-        return (profile.capacity() + first_median.capacity()) * sizeof(float) + where.bytes() +
+        return profile.capacity() * sizeof(float) + where.bytes() +
                (xy.capacity() + factor.capacity() + cells.capacity() + coarse.capacity()) * sizeof(double) +
                row_returned.capacity() * sizeof(double) + order.capacity() * sizeof(std::uint32_t);
     }
@@ -933,7 +986,8 @@ inline void coarse_model(const excess_map& where, int w, int h,
 // shape falls to nothing, the return's cap (ratio <= 1) binds, and the frame kept 0.85 of its
 // light against 0.93 (0.90 with the first median kept where the second is 0; 0.88 with the
 // larger of the second and the cleaned mean's median, which also lost the production gain).
-// Twice costs a second pass over the frame and its first pass's copy (12 bytes a pixel, kept).
+// Twice costs a second pass over the frame and no memory (median3x3_twice_rows: the first
+// median's rows made as the second asks for them).
 enum class shape_medians : unsigned char { once, twice };
 template <class ShapeRows>
 inline void shape_profile(ShapeRows&& shape_rows, shape_medians medians, int w, int h, energy_scratch& s,
@@ -942,13 +996,7 @@ inline void shape_profile(ShapeRows&& shape_rows, shape_medians medians, int w, 
         median3x3_rows(shape_rows, s.profile, w, h, exec);
         return;
     }
-    median3x3_rows(shape_rows, s.first_median, w, h, exec);
-    const std::size_t n = static_cast<std::size_t>(w) * 3;
-    median3x3_rows([&](int y, double* row) {
-                       const float* in = &s.first_median[static_cast<std::size_t>(y) * n];
-                       for (std::size_t i = 0; i < n; ++i) row[i] = in[i];
-                   },
-                   s.profile, w, h, exec);
+    median3x3_twice_rows(shape_rows, s.profile, w, h, exec);
 }
 
 // The model of the energy return for one frame, from the removed excess already in s.where
