@@ -86,7 +86,14 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <type_traits>
 #include <vector>
+
+#if defined(__SSE2__) || defined(_M_X64)
+#include <emmintrin.h>
+#elif defined(__ARM_NEON) && defined(__aarch64__)
+#include <arm_neon.h>
+#endif
 
 #include "fused.hpp"
 #include "image_view.hpp"
@@ -213,28 +220,81 @@ inline tap_pair taps_at(int p2, int d, bool half, int n) noexcept {
     return {p2 - o2 >= 0 && lo < n ? lo : -1, hi >= 0 && hi < n ? hi : -1};
 }
 
+// std::min and std::max of four floats a lane, with their operand order (so the same value
+// whichever of a tie, -0 or NaN it meets): std::min(a, b) is b < a ? b : a, SSE2's min(b, a);
+// std::max(a, b) is a < b ? b : a, SSE2's max(b, a). Where the target has neither SSE2 nor
+// NEON, the scalar loops do the work.
+#if defined(__SSE2__) || defined(_M_X64)
+#define FIREFLY_LANES4 1
+using f4 = __m128;
+inline f4 load4(const float* p) noexcept { return _mm_loadu_ps(p); }
+inline void store4(float* p, f4 v) noexcept { _mm_storeu_ps(p, v); }
+inline f4 min4(f4 a, f4 b) noexcept { return _mm_min_ps(b, a); }
+inline f4 max4(f4 a, f4 b) noexcept { return _mm_max_ps(b, a); }
+#elif defined(__ARM_NEON) && defined(__aarch64__)
+#define FIREFLY_LANES4 1
+using f4 = float32x4_t;
+inline f4 load4(const float* p) noexcept { return vld1q_f32(p); }
+inline void store4(float* p, f4 v) noexcept { vst1q_f32(p, v); }
+inline f4 min4(f4 a, f4 b) noexcept { return vbslq_f32(vcltq_f32(b, a), b, a); }
+inline f4 max4(f4 a, f4 b) noexcept { return vbslq_f32(vcltq_f32(a, b), b, a); }
+#endif
+
 // The median of the 3x3 windows of three rows of n values (3 interleaved channels: the window
 // of value i takes i - 3, i, i + 3 of each row), at i in [3, n - 3), into o. Each column of 3 is
 // sorted once and the median of the 9 is the median of (the largest column minimum, the median
 // column median, the smallest column maximum): min and max only select, so the value is the
-// 9's median exactly. lo, mid, hi: scratch of n values. (Loops split so that each vectorises:
-// few arrays to check for overlap, one type.)
+// 9's median exactly. lo, mid, hi: scratch of n values. (Loops split so that each vectorises
+// where the compiler does it, -O3; float, the profile's type, by hand four lanes at a time, so
+// that -O2 builds, whose cost model leaves these loops scalar, select as fast.)
 template <class M>
-inline void median3x3_interior(const M* up, const M* here, const M* down, std::size_t n, M* lo, M* mid, M* hi,
-                               M* o) {
-    for (std::size_t i = 0; i < n; ++i) {
+inline void median3x3_columns(const M* up, const M* here, const M* down, std::size_t i, std::size_t n, M* lo, M* hi) {
+    for (; i < n; ++i) {
         lo[i] = std::min(std::min(up[i], here[i]), down[i]);
         hi[i] = std::max(std::max(up[i], here[i]), down[i]);
     }
-    for (std::size_t i = 0; i < n; ++i)
-        mid[i] = std::max(std::min(up[i], here[i]), std::min(std::max(up[i], here[i]), down[i]));
-    for (std::size_t i = 3; i + 3 < n; ++i) {
+}
+template <class M>
+inline void median3x3_middles(const M* up, const M* here, const M* down, std::size_t i, std::size_t n, M* mid) {
+    for (; i < n; ++i) mid[i] = std::max(std::min(up[i], here[i]), std::min(std::max(up[i], here[i]), down[i]));
+}
+template <class M>
+inline void median3x3_rows_of(const M* lo, const M* mid, const M* hi, std::size_t i, std::size_t n, M* o) {
+    for (; i + 3 < n; ++i) {
         const M l = std::max(std::max(lo[i - 3], lo[i]), lo[i + 3]);
         const M u = std::min(std::min(hi[i - 3], hi[i]), hi[i + 3]);
         const M m0 = mid[i - 3], m1 = mid[i], m2 = mid[i + 3];
         const M m = std::max(std::min(m0, m1), std::min(std::max(m0, m1), m2));
         o[i] = std::max(std::min(l, m), std::min(std::max(l, m), u));
     }
+}
+template <class M>
+inline void median3x3_interior(const M* up, const M* here, const M* down, std::size_t n, M* lo, M* mid, M* hi,
+                               M* o) {
+    std::size_t i = 0;  // where the scalar loops start
+#if defined(FIREFLY_LANES4)
+    if constexpr (std::is_same_v<M, float>)
+        for (; i + 4 <= n; i += 4) {
+            const f4 u = load4(up + i), h = load4(here + i), d = load4(down + i);
+            store4(lo + i, min4(min4(u, h), d));
+            store4(hi + i, max4(max4(u, h), d));
+            store4(mid + i, max4(min4(u, h), min4(max4(u, h), d)));
+        }
+#endif
+    median3x3_columns(up, here, down, i, n, lo, hi);
+    median3x3_middles(up, here, down, i, n, mid);
+    i = 3;  // every column sorted: the windows
+#if defined(FIREFLY_LANES4)
+    if constexpr (std::is_same_v<M, float>)
+        for (; i + 7 <= n; i += 4) {  // the last lane's i + 3 inside
+            const f4 l = max4(max4(load4(lo + i - 3), load4(lo + i)), load4(lo + i + 3));
+            const f4 u = min4(min4(load4(hi + i - 3), load4(hi + i)), load4(hi + i + 3));
+            const f4 m0 = load4(mid + i - 3), m1 = load4(mid + i), m2 = load4(mid + i + 3);
+            const f4 m = max4(min4(m0, m1), min4(max4(m0, m1), m2));
+            store4(o + i, max4(min4(l, m), min4(max4(l, m), u)));
+        }
+#endif
+    median3x3_rows_of(lo, mid, hi, i, n, o);
 }
 
 // The 3x3 medians of a w x h image (3 interleaved channels) row by row, from input rows that
