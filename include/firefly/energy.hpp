@@ -225,14 +225,14 @@ inline tap_pair taps_at(int p2, int d, bool half, int n) noexcept {
 // std::max(a, b) is a < b ? b : a, SSE2's max(b, a). Where the target has neither SSE2 nor
 // NEON, the scalar loops do the work.
 #if defined(__SSE2__) || defined(_M_X64)
-#define FIREFLY_LANES4 1
+#define FIREFLY_DETAIL_LANES4 1
 using f4 = __m128;
 inline f4 load4(const float* p) noexcept { return _mm_loadu_ps(p); }
 inline void store4(float* p, f4 v) noexcept { _mm_storeu_ps(p, v); }
 inline f4 min4(f4 a, f4 b) noexcept { return _mm_min_ps(b, a); }
 inline f4 max4(f4 a, f4 b) noexcept { return _mm_max_ps(b, a); }
 #elif defined(__ARM_NEON) && defined(__aarch64__)
-#define FIREFLY_LANES4 1
+#define FIREFLY_DETAIL_LANES4 1
 using f4 = float32x4_t;
 inline f4 load4(const float* p) noexcept { return vld1q_f32(p); }
 inline void store4(float* p, f4 v) noexcept { vst1q_f32(p, v); }
@@ -272,7 +272,7 @@ template <class M>
 inline void median3x3_interior(const M* up, const M* here, const M* down, std::size_t n, M* lo, M* mid, M* hi,
                                M* o) {
     std::size_t i = 0;  // where the scalar loops start
-#if defined(FIREFLY_LANES4)
+#if defined(FIREFLY_DETAIL_LANES4)
     if constexpr (std::is_same_v<M, float>)
         for (; i + 4 <= n; i += 4) {
             const f4 u = load4(up + i), h = load4(here + i), d = load4(down + i);
@@ -284,7 +284,7 @@ inline void median3x3_interior(const M* up, const M* here, const M* down, std::s
     median3x3_columns(up, here, down, i, n, lo, hi);
     median3x3_middles(up, here, down, i, n, mid);
     i = 3;  // every column sorted: the windows
-#if defined(FIREFLY_LANES4)
+#if defined(FIREFLY_DETAIL_LANES4)
     if constexpr (std::is_same_v<M, float>)
         for (; i + 7 <= n; i += 4) {  // the last lane's i + 3 inside
             const f4 l = max4(max4(load4(lo + i - 3), load4(lo + i)), load4(lo + i + 3));
