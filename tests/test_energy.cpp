@@ -102,7 +102,7 @@ TEST_CASE("energy return: the median taken twice in one pass is the float median
     for (const int h : {1, 2, 3, 15, 16, 17, 33, 40})
         for (const int w : {1, 2, 7}) {
             const std::size_t n = static_cast<std::size_t>(w * h) * 3;
-            std::vector<double> in(n), first;
+            std::vector<double> in(n);
             for (double& v : in) v = static_cast<double>(rng() % 7) * (rng() % 4 ? 1.0 : 0.3) + (rng() % 9 ? 0.0 : 1e-310);
             std::vector<float> once_kept, expect, got;
             detail::median3x3_rows([&](int y, double* row) { std::copy_n(&in[static_cast<std::size_t>(y * w) * 3], w * 3, row); },
@@ -643,7 +643,7 @@ TEST_CASE("energy return on an image: the dense model's bits from the list, in a
             excess[list[e] * 3 + c] = x;
         }
     for (std::size_t i = 0; i < np * 3; ++i) shape[i] = static_cast<double>(color[i]) + excess[i];
-    // the image version takes the shape's 3x3 median twice (shape_profile, the first kept as
+    // the image version takes the shape's 3x3 median twice (shape_profile, the first's rows in
     // float): the dense model, which takes it once, is given the first
     std::vector<double> once;
     detail::median3x3(shape, once, w, h, executor{});
