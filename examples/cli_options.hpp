@@ -147,8 +147,9 @@ const char* const description =
 const char* const footer =
     "Outputs: every file of a frame is first written to an exclusive temporary in its folder and\n"
     "renamed only when all of them are complete; a failure leaves none of them. An output that is\n"
-    "an input, and two inputs that are one file (under any names), are refused. A sequence goes on\n"
-    "past a bad frame, reports it (stderr and --report) and exits 1 at the end.\n";
+    "an input, two inputs that are one file (under any names), an output that is a directory,\n"
+    "device or pipe, and a sequence's --halves, --masks or --preview without '#' are refused. A\n"
+    "sequence goes on past a bad frame, reports it (stderr and --report) and exits 1 at the end.\n";
 
 // An option taking one of a few words (name -> value).
 template <class E>
@@ -368,9 +369,10 @@ inline std::string choose_inputs(options& c, const raw_args& r) {
 inline std::string check_mode_options(const options& c) {
     const bool halves = c.mode == input_mode::halves, renders = c.mode == input_mode::renders;
     const bool pfm_variance = !c.var_a.empty() || !c.var_b.empty();
-    if (!halves && pfm_variance) return "--variance-a and --variance-b go with PFM half buffers (HALF_A HALF_B) only";
     bool pfm = false;
     for (const auto& p : c.inputs) pfm = pfm || ends_with_ci(p, ".pfm");
+    if (pfm_variance && !(halves && pfm))
+        return "--variance-a and --variance-b go with PFM half buffers (HALF_A HALF_B) only";
     if (halves && pfm && (c.var_a.empty() || c.var_b.empty()))
         return "PFM inputs hold colour only: give --variance-a and --variance-b PFM files";
     if (c.mode == input_mode::buffers && pfm)
@@ -394,6 +396,12 @@ inline std::string check_sequence_paths(const options& c) {
     for (const auto& p : paths)
         if (p.find('#') == std::string::npos)
             return "--frames needs '#' in every input path: " + p + " has none (it would be read for every frame)";
+    const std::pair<const char*, const std::string*> prefixes[] = {
+        {"--halves", &c.halves}, {"--masks", &c.masks}, {"--preview", &c.preview}};
+    for (const auto& [flag, prefix] : prefixes)
+        if (!prefix->empty() && prefix->find('#') == std::string::npos)
+            return std::string("--frames needs '#' in ") + flag + " too: " + *prefix +
+                   " has none (every frame would overwrite the last)";
     return {};
 }
 

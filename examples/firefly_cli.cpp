@@ -113,17 +113,37 @@ bool existing_id(const std::string& path, file_id& id) {
     return !path.empty() && firefly_tools::identify(path, id) && id.leaf.empty();
 }
 
-// Two inputs of one frame that are one file (same device and inode, whatever the spelling).
+// Two inputs of one frame that are one file (same device and inode, whatever the spelling):
+// the buffers' files and the halves' PFM variances alike.
 std::string duplicate_input(const options& c, const frame_files& f) {
-    std::map<file_id, int> seen;
-    for (int i = 0; i < static_cast<int>(f.in.size()); ++i) {
+    std::vector<std::pair<std::string, std::string>> files;  // label, path
+    for (std::size_t i = 0; i < f.in.size(); ++i) files.emplace_back(input_label(c, static_cast<int>(i)), f.in[i]);
+    for (std::size_t i = 0; i < f.var.size(); ++i)
+        if (!f.var[i].empty()) files.emplace_back(i ? "--variance-b" : "--variance-a", f.var[i]);
+    std::map<file_id, std::size_t> seen;
+    for (std::size_t i = 0; i < files.size(); ++i) {
         file_id id;
-        if (!existing_id(f.in[static_cast<std::size_t>(i)], id)) continue;
+        if (!existing_id(files[i].second, id)) continue;
         const auto [it, fresh] = seen.emplace(id, i);
         if (!fresh)
-            return input_label(c, it->second) + " and " + input_label(c, i) + " are the same file (" +
-                   f.in[static_cast<std::size_t>(it->second)] + ", " + f.in[static_cast<std::size_t>(i)] + ")";
+            return files[it->second].first + " and " + files[i].first + " are the same file (" + files[it->second].second +
+                   ", " + files[i].second + ")";
     }
+    return {};
+}
+
+// An output name the final rename cannot take: an existing directory, device, FIFO or socket
+// (a rename would replace the node itself: as root, -o /dev/null would replace the system's),
+// or a name longer than its folder allows. Found before anything is written, so that a frame
+// never fails half committed.
+std::string output_target_problem(const std::string& path) {
+    struct stat st {};
+    if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode))
+        return "output " + path + " exists and is not a regular file (a directory, device or pipe): refused";
+    const long name_max = ::pathconf(firefly_tools::parent_dir(path).c_str(), _PC_NAME_MAX);
+    const long limit = name_max > 0 ? name_max : 255;
+    if (static_cast<long>(firefly_tools::leaf_name(path).size()) > limit)
+        return "output name too long (over " + std::to_string(limit) + " bytes): " + firefly_tools::leaf_name(path);
     return {};
 }
 
@@ -134,8 +154,10 @@ std::string output_collision(const options& c, const frame_files& f, const id_ma
     for (const auto& p : f.masks) paths.push_back(&p);
     id_map outs;
     for (const std::string* p : paths) {
+        if (p->empty()) continue;
+        if (std::string e = output_target_problem(*p); !e.empty()) return e;
         file_id id;
-        if (p->empty() || !firefly_tools::identify(*p, id)) continue;  // no such folder: the write will say so
+        if (!firefly_tools::identify(*p, id)) continue;  // no such folder: the write will say so
         if (const auto in = inputs.find(id); in != inputs.end()) return "output " + *p + " is the input " + in->second + ": refused";
         if (const auto o = outs.find(id); o != outs.end()) return "outputs " + o->second + " and " + *p + " are the same file";
         outs.emplace(id, *p);

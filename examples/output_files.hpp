@@ -105,16 +105,33 @@ public:
             }
         return e;
     }
-    // Renames every temporary over its final name, last opened first.
+    // Renames every temporary over its final name, last opened first. Where a rename fails
+    // (the tool's checks before writing find what can be foreseen: a directory or a device in
+    // the way, a name too long), the ones before it are undone: a final name that held a file
+    // gets it back (kept by a hard link where the file system has them), one that held none
+    // is removed. So a set is committed whole or not at all.
     std::string commit() {
         std::string e = close_all();
         if (!e.empty()) return e;
+        std::vector<renamed> done;
         while (!files_.empty()) {
             const entry& f = files_.back();
-            if (std::rename(f.temp.c_str(), f.final_name.c_str()) != 0)
-                return "cannot rename " + f.temp + " to " + f.final_name + ": " + std::strerror(errno);
+            renamed r{f.final_name, f.temp + ".old"};
+            struct stat st {};
+            const bool existed = ::lstat(f.final_name.c_str(), &st) == 0;
+            if (!existed || ::link(f.final_name.c_str(), r.backup.c_str()) != 0) r.backup.clear();
+            if (std::rename(f.temp.c_str(), f.final_name.c_str()) != 0) {
+                e = "cannot rename " + f.temp + " to " + f.final_name + ": " + std::strerror(errno);
+                if (!r.backup.empty()) ::unlink(r.backup.c_str());
+                undo(done);
+                return e;
+            }
+            r.replaced = existed;
+            done.push_back(std::move(r));
             files_.pop_back();
         }
+        for (const renamed& r : done)
+            if (!r.backup.empty()) ::unlink(r.backup.c_str());
         return {};
     }
     // Removes every temporary not yet renamed.
@@ -129,6 +146,17 @@ private:
         std::string final_name, temp;
         int fd;
     };
+    struct renamed {
+        std::string final_name, backup;  // backup: a hard link to the file it replaced, or empty
+        bool replaced = false;
+    };
+    // Takes back the renames of a commit that failed, last first.
+    static void undo(const std::vector<renamed>& done) {
+        for (auto r = done.rbegin(); r != done.rend(); ++r) {
+            if (!r->backup.empty()) (void)std::rename(r->backup.c_str(), r->final_name.c_str());
+            else if (!r->replaced) (void)::unlink(r->final_name.c_str());
+        }
+    }
     std::vector<entry> files_;
 };
 

@@ -136,6 +136,8 @@ endif()
 set(O ${WORK}/bad.exr)
 make(${WORK}/nan.pfm)  # 16x8, all NaN
 make(${WORK}/nan2.pfm)
+make(${WORK}/nan_var.pfm)  # the same, as a variance file of its own (one file is never two inputs)
+make(${WORK}/nan2_var.pfm)
 expect_fail(missing "cannot open" ${O} ${WORK}/nope.exr ${B} -o ${O})
 file(WRITE ${WORK}/text.exr "this is not an image\n")
 expect_fail(not_exr "not an OpenEXR file" ${O} ${WORK}/text.exr ${B} -o ${O})
@@ -152,10 +154,10 @@ expect_fail(missing_frame "frame 9" ${WORK}/seq_clean.0009.exr "${WORK}/seq_a.##
             --frames 9-9 -o "${WORK}/seq_clean.####.exr")
 # halves of different sizes: the 96x80 crop against a 16x8 image
 expect_fail(sizes "differ in size" ${O} ${DATA}/a_color.pfm ${WORK}/nan.pfm --variance-a ${DATA}/a_variance.pfm
-            --variance-b ${WORK}/nan.pfm -o ${O})
+            --variance-b ${WORK}/nan_var.pfm -o ${O})
 # NaN everywhere
-expect_fail(all_nan "no valid pixel" ${O} ${WORK}/nan.pfm ${WORK}/nan2.pfm --variance-a ${WORK}/nan.pfm
-            --variance-b ${WORK}/nan2.pfm -o ${O})
+expect_fail(all_nan "no valid pixel" ${O} ${WORK}/nan.pfm ${WORK}/nan2.pfm --variance-a ${WORK}/nan_var.pfm
+            --variance-b ${WORK}/nan2_var.pfm -o ${O})
 
 # --- 6: an output that is an input, under any name, is refused and nothing is written -------
 configure_file(${A} ${WORK}/in_a.exr COPYONLY)
@@ -190,6 +192,42 @@ make(alpha ${A} ${WORK}/alpha_a.exr)
 expect_fail(alpha_one_half "alpha channel A is in" ${O} ${WORK}/alpha_a.exr ${IB} -o ${O})
 expect_ok(no_alpha ${WORK}/alpha_a.exr ${IB} -o ${O} --no-alpha -q)
 file(REMOVE ${O})
+
+# --- a frame is written whole or not at all: outputs the final rename cannot take ------------
+# (a directory, a device or a pipe in the way; a name too long) are refused before anything is
+# written, where before the masks and halves were renamed into place and the main output failed.
+file(MAKE_DIRECTORY ${WORK}/out_dir.exr)
+expect_fail(output_is_directory "not a regular file" ${WORK}/dirrun_a.exr ${IA} ${IB} -o ${WORK}/out_dir.exr
+            --halves ${WORK}/dirrun --masks ${WORK}/dirmask)
+foreach(f dirrun_b.exr dirmask_a.exr dirmask_b.exr)
+  if(EXISTS ${WORK}/${f})
+    message(SEND_ERROR "output_is_directory: ${f} was written")
+  endif()
+endforeach()
+execute_process(COMMAND mkfifo ${WORK}/pipe.exr RESULT_VARIABLE fifo_rc)
+if(fifo_rc EQUAL 0)
+  run_refused(output_is_pipe "not a regular file" ${IA} ${IB} -o ${WORK}/pipe.exr)
+  if(NOT IS_DIRECTORY ${WORK}/pipe.exr AND EXISTS ${WORK}/pipe.exr)
+    execute_process(COMMAND test -p ${WORK}/pipe.exr RESULT_VARIABLE still_pipe)
+    if(NOT still_pipe EQUAL 0)
+      message(SEND_ERROR "output_is_pipe: the pipe was replaced by a file")
+    endif()
+  endif()
+endif()
+string(REPEAT "x" 252 long_name)
+expect_fail(output_name_too_long "name too long" ${O} ${IA} ${IB} -o ${O} --masks ${WORK}/${long_name})
+# a sequence's secondary outputs need '#' as its main output does (each frame overwrote the last)
+expect_fail(sequence_halves_without_hash "needs '#' in --halves" ${WORK}/seq_clean.0007.exr
+            "${WORK}/seq_a.####.exr" "${WORK}/seq_b.####.exr" --frames 7-8 -o "${WORK}/seq_clean.####.exr" --halves ${WORK}/h)
+expect_fail(sequence_masks_without_hash "needs '#' in --masks" ${WORK}/seq_clean.0007.exr
+            "${WORK}/seq_a.####.exr" "${WORK}/seq_b.####.exr" --frames 7-8 -o "${WORK}/seq_clean.####.exr" --masks ${WORK}/m)
+# PFM variances: not ignored beside EXR halves, and never one file twice among the inputs
+expect_fail(variance_with_exr_halves "go with PFM half buffers" ${O} ${IA} ${IB} -o ${O}
+            --variance-a ${WORK}/nope.pfm --variance-b ${WORK}/nope2.pfm)
+expect_fail(variance_twice "same file" ${O} ${DATA}/a_color.pfm ${DATA}/b_color.pfm -o ${O}
+            --variance-a ${DATA}/a_variance.pfm --variance-b ${DATA}/a_variance.pfm)
+expect_fail(colour_as_variance "same file" ${O} ${DATA}/a_color.pfm ${DATA}/b_color.pfm -o ${O}
+            --variance-a ${DATA}/b_color.pfm --variance-b ${DATA}/a_color.pfm)
 
 # --- 7: a planted temporary name is never followed -----------------------------------------
 file(WRITE ${WORK}/victim.txt "victim\n")
@@ -265,7 +303,8 @@ expect_fail(exr_big_window "too large for the file" ${O} ${WORK}/bigwindow.exr $
 make(fill ${WORK}/half.pfm 16 8 3 0.5)
 make(fill ${WORK}/half2.pfm 16 8 3 0.5)
 make(fill ${WORK}/fltmax.pfm 16 8 3 max)
-expect_ok(flt_max ${WORK}/half.pfm ${WORK}/half2.pfm --variance-a ${WORK}/fltmax.pfm --variance-b ${WORK}/fltmax.pfm
+make(fill ${WORK}/fltmax2.pfm 16 8 3 max)
+expect_ok(flt_max ${WORK}/half.pfm ${WORK}/half2.pfm --variance-a ${WORK}/fltmax.pfm --variance-b ${WORK}/fltmax2.pfm
           -o ${WORK}/fltmax.exr -q)
 exr_info(${WORK}/fltmax.exr info)
 if(NOT info MATCHES "nonfinite 0$")
