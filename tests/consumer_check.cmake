@@ -9,11 +9,13 @@ include("${CMAKE_CURRENT_LIST_DIR}/check_run.cmake")
 
 if(MODE STREQUAL "find_package")
   # Install firefly alone (no tests, benchmarks or examples) to a temporary prefix.
+  # Configured for one prefix, installed to another (`cmake --install --prefix`): what is
+  # installed must not name the first.
   run(${CMAKE_COMMAND} -S "${FIREFLY_SOURCE}" -B "${WORK}/firefly-build" -G "${GENERATOR}"
-      -DCMAKE_INSTALL_PREFIX=${WORK}/prefix -DFIREFLY_BUILD_TESTS=OFF
+      -DCMAKE_INSTALL_PREFIX=${WORK}/configured-prefix -DFIREFLY_BUILD_TESTS=OFF
       -DFIREFLY_BUILD_BENCHMARKS=OFF -DFIREFLY_BUILD_EXAMPLES=OFF -DFIREFLY_INSTALL=ON)
   run(${CMAKE_COMMAND} --build "${WORK}/firefly-build")
-  run(${CMAKE_COMMAND} --install "${WORK}/firefly-build")
+  run(${CMAKE_COMMAND} --install "${WORK}/firefly-build" --prefix "${WORK}/prefix")
   foreach(f include/firefly/firefly.hpp share/cmake/firefly/fireflyConfig.cmake
             share/cmake/firefly/fireflyConfigVersion.cmake share/pkgconfig/firefly.pc)
     if(NOT EXISTS "${WORK}/prefix/${f}")
@@ -31,10 +33,21 @@ if(MODE STREQUAL "find_package")
   if(rc EQUAL 0)
     message(FATAL_ERROR "find_package(firefly 99) succeeded against an older major version")
   endif()
-  # pkg-config users get the include path.
+  # pkg-config users get the installed include path, and it builds the consumer.
   file(READ "${WORK}/prefix/share/pkgconfig/firefly.pc" pc)
-  if(NOT pc MATCHES "Cflags: -I")
-    message(FATAL_ERROR "firefly.pc has no Cflags")
+  if(NOT pc MATCHES "Cflags: -I" OR pc MATCHES "configured-prefix")
+    message(FATAL_ERROR "firefly.pc names no include path, or the configured prefix:\n${pc}")
+  endif()
+  find_program(PKG_CONFIG pkg-config)
+  if(PKG_CONFIG)
+    set(ENV{PKG_CONFIG_PATH} "${WORK}/prefix/share/pkgconfig")
+    execute_process(COMMAND ${PKG_CONFIG} --cflags firefly OUTPUT_VARIABLE cflags RESULT_VARIABLE rc
+                    OUTPUT_STRIP_TRAILING_WHITESPACE)
+    separate_arguments(cflags UNIX_COMMAND "${cflags}")
+    if(NOT rc EQUAL 0)
+      message(FATAL_ERROR "pkg-config --cflags firefly failed")
+    endif()
+    run(${CXX} ${cflags} -fsyntax-only "${CONSUMER}/main.cpp")
   endif()
 elseif(MODE STREQUAL "add_subdirectory")
   run(${CMAKE_COMMAND} -S "${CONSUMER}" -B "${WORK}/consumer-build" -G "${GENERATOR}"
