@@ -1,6 +1,7 @@
 """The README's Python example runs as written, on EXRs written here with OpenImageIO, and
 gives the module's (and the command-line tool's) bits; `cmake --install` puts an importable
-module under the prefix."""
+module under the prefix. Where ../shared/data is next to the repository: the count the README
+quotes for its example on the example render, and docs/'s pictures, are the current output."""
 import os
 import re
 import subprocess
@@ -114,3 +115,51 @@ def test_readme_lists_every_option():
     assert set(re.findall(r"`(\w+)`", listed)) == set(firefly.Detector().options)
     listed = re.search(r"member is a\s+keyword \((.*?)\), and `pair`", section, re.S).group(1)
     assert set(re.findall(r"`(\w+)`", listed)) | {"pair"} == set(firefly.BufferDetector().options)
+
+
+def shared_render(name):
+    """../shared/data/NAME next to the repository, or a skip where a clone has none."""
+    path = os.environ.get("FIREFLY_README")
+    if not path:
+        pytest.skip("FIREFLY_README is not set (run the tests through ctest)")
+    d = os.path.join(os.path.dirname(os.path.abspath(path)), "..", "shared", "data", name)
+    if not os.path.isdir(d):
+        pytest.skip("no ../shared/data/%s next to the repository" % name)
+    return d
+
+
+def test_readme_example_count_on_the_example_render(tmp_path):
+    """The count the README says its example prints on the example render is what it prints."""
+    pytest.importorskip("OpenImageIO")
+    d = shared_render("cycles-caustics")
+    said = re.search(r"On the example render this prints `(\d+) fireflies removed` \(the tool says "
+                     r"`fireflies (\d+) \+\s+(\d+)`\)", python_section())
+    assert said, "the README no longer states the example's count"
+    for half in ("half_a.exr", "half_b.exr"):
+        os.symlink(os.path.join(d, half), tmp_path / half)
+    done = subprocess.run([sys.executable, "-c", readme_example()], cwd=tmp_path, env=dict(os.environ),
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "%s fireflies removed" % said.group(1)
+    assert int(said.group(2)) + int(said.group(3)) == int(said.group(1))
+
+
+def test_readme_pictures_are_the_current_output(tmp_path):
+    """docs/'s pictures of the real renders are what bench/readme_images.py and
+    bench/bucket_images.py make now (to one 8-bit step), so that no change of the library
+    leaves them stale."""
+    oiio = pytest.importorskip("OpenImageIO")
+    shared_render("cycles-caustics")
+    root = os.path.dirname(os.path.abspath(os.environ["FIREFLY_README"]))
+    data = os.path.join(root, "..", "shared", "data")
+    for script, source in (("readme_images.py", data), ("bucket_images.py", os.path.join(data, "cycles-caustics"))):
+        done = subprocess.run([sys.executable, os.path.join(root, "bench", script), source, str(tmp_path)],
+                              env=dict(os.environ), capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr
+    made = sorted(p for p in os.listdir(tmp_path) if p.endswith(".png"))
+    assert "cycles-caustics_after.png" in made and "bucket_firefly.png" in made
+    for name in made:
+        now = oiio.ImageBuf(str(tmp_path / name)).get_pixels(oiio.UINT8).astype(int)
+        kept = oiio.ImageBuf(os.path.join(root, "docs", name)).get_pixels(oiio.UINT8).astype(int)
+        assert now.shape == kept.shape, name
+        assert np.abs(now - kept).max() <= 1, "docs/%s is stale: rerun bench/readme_images.py and bucket_images.py" % name
