@@ -296,7 +296,7 @@ inline void add_detector_options(CLI::App& app, options& c) {
         ->check(whole_in(3, 63, "an odd whole number from 3 to 63") &
                 CLI::Validator([](std::string& s) { return std::atoll(s.c_str()) % 2 ? "" : "wants an odd whole number, not '" + s + "'"; }, ""))
         ->group(g);
-    app.add_option("--sigma", o.reconstruction.sigma, "reconstruction Gaussian sigma")->type_name("X")->check(number_in(0, 1e30, true, false, "a positive number"))->group(g);
+    app.add_option("--sigma", o.reconstruction.sigma, "reconstruction Gaussian sigma (>= 0.1)")->type_name("X")->check(number_in(0.1, 1e30, false, false, "a number >= 0.1"))->group(g);
     app.add_option("--tolerance", o.reconstruction.tolerance, "phase 2 relative tolerance")->type_name("X")->check(number_in(0, 1e30, false, false, "a number >= 0"))->group(g);
     app.add_option("--iterations", o.reconstruction.max_iterations, "phase 2 iteration cap")->type_name("N")
         ->check(whole_in(0, 1000000, "a whole number from 0 to 1000000"))->group(g);

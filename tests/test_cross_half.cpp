@@ -5,6 +5,8 @@
 
 #include <cmath>
 #include <cstring>
+#include <deque>
+#include <thread>
 #include <vector>
 
 #include "catch.hpp"
@@ -229,6 +231,38 @@ TEST_CASE("detectors share one lambda cache", "[cross_half][pipeline]") {
     CHECK(ra.lambdas_computed > 0);
     CHECK(rb.lambdas_computed == 0);  // every lambda the second needs, the first computed
     CHECK(&a.lambdas() == &b.lambdas());
+}
+
+TEST_CASE("detectors sharing one lambda cache run on two threads at once", "[cross_half][pipeline][threads]") {
+    // Each frame grows, so each needs lambdas the cache does not hold yet; a frame's end asks
+    // the cache its size (scratch_bytes) while the other thread fills it: a data race that
+    // ThreadSanitizer found (scripts/test.sh --threads) before the cache locked its bytes().
+    // Here: both threads' outputs are those of a detector alone.
+    auto frames = [](int seed) {
+        std::deque<frame_views> out;  // frame_views stay where they are made (their views point in)
+        for (int i = 0; i < 12; ++i) {
+            out.emplace_back(flat(40 + 9 * i + seed, 30 + 5 * i, 2));
+            out.back().set(0, 3 + i, 4, 500.0f, 250000.0f);
+            out.back().set(1, 7, 5 + i, 300.0f, 90000.0f);
+        }
+        return out;
+    };
+    detector_options other;
+    other.alpha = 0.01;  // a second table in the shared cache
+    detector a(detector_options{}), b(other, executor{}, a.shared_lambdas());
+    std::deque<frame_views> fa = frames(1), fb = frames(2), ra = frames(1), rb = frames(2);
+    std::thread ta([&] { for (frame_views& v : fa) (void)a.process(v.h[0], v.h[1]); });
+    std::thread tb([&] { for (frame_views& v : fb) (void)b.process(v.h[0], v.h[1]); });
+    ta.join();
+    tb.join();
+    detector alone_a(detector_options{}), alone_b(other);
+    for (frame_views& v : ra) (void)alone_a.process(v.h[0], v.h[1]);
+    for (frame_views& v : rb) (void)alone_b.process(v.h[0], v.h[1]);
+    for (std::size_t i = 0; i < fa.size(); ++i) {
+        CHECK(fa[i].f.color[0] == ra[i].f.color[0]);
+        CHECK(fb[i].f.color[1] == rb[i].f.color[1]);
+    }
+    CHECK(a.lambdas().bytes() > 0);
 }
 
 TEST_CASE("enum options outside their enumerators are errors", "[cross_half][errors]") {

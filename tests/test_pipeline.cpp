@@ -618,6 +618,15 @@ TEST_CASE("constant, 1x1, all-black and all-NaN frames", "[pipeline][hard]") {
     frame_report r = d.process(a, b);
     CHECK(r.error.ok());
     CHECK(r.half[0].ignored == 10);
+    // one NaN in an all-black frame: taken from the other half's black, and the frame is ok
+    // (it said "no usable pixel in either half" while every pixel had been rebuilt)
+    black[4] = std::numeric_limits<float>::quiet_NaN();
+    r = d.process(a, b);
+    CHECK(r.error.ok());
+    CHECK(r.half[0].nonfinite == 1);
+    CHECK(r.half[0].repaired == 1);
+    CHECK(r.half[0].unreachable == 0);
+    for (float x : black) CHECK(x == 0.0f);
     std::vector<float> nan(30, std::numeric_limits<float>::quiet_NaN()), nv = nan, nan2 = nan, nv2 = nan;
     half_buffer<float> na{*make_image_view(nan.data(), 5, 2, 3), *make_image_view(nv.data(), 5, 2, 3), {}};
     half_buffer<float> nb{*make_image_view(nan2.data(), 5, 2, 3), *make_image_view(nv2.data(), 5, 2, 3), {}};

@@ -206,6 +206,8 @@ TEST_CASE("options are checked", "[reconstruct]") {
     o.kernel_width = 7;
     o.sigma = 0;
     CHECK(!check_reconstruct_options(o).ok());
+    o.sigma = 0.0999;  // every weight would underflow (at 0.02 the rebuild found no source)
+    CHECK(!check_reconstruct_options(o).ok());
     o.sigma = 1.5;
     CHECK(check_reconstruct_options(o).ok());
     img im(3, 3, 1);

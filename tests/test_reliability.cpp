@@ -253,3 +253,29 @@ TEST_CASE("finite double frames near DBL_MAX come out finite from both detectors
         CHECK(finite);
     }
 }
+
+TEST_CASE("the narrowest kernel allowed still reads its neighbours", "[reconstruct]") {
+    // sigma 0.1: the nearest ring's weight is exp(-50), its square exp(-100); both halves NaN at
+    // the centre, so the spatial rule must rebuild it from the eight valid neighbours.
+    const int w = 8, h = 8;
+    std::vector<float> a(w * h * 3), b(w * h * 3), va(w * h * 3, 0.01f), vb(w * h * 3, 0.01f);
+    for (int i = 0; i < w * h * 3; ++i)
+        a[static_cast<std::size_t>(i)] = 1.0f + 0.01f * static_cast<float>(i % 7),
+        b[static_cast<std::size_t>(i)] = 1.0f + 0.01f * static_cast<float>(i % 5);
+    const int centre = (4 * w + 4) * 3;
+    for (int c = 0; c < 3; ++c) a[centre + c] = b[centre + c] = std::numeric_limits<float>::quiet_NaN();
+    detector_options o;
+    o.reconstruction.sigma = 0.1;
+    REQUIRE(check_options(o).ok());
+    half_buffer<float> A{*make_image_view(a.data(), w, h, 3), *make_image_view(va.data(), w, h, 3), {}};
+    half_buffer<float> B{*make_image_view(b.data(), w, h, 3), *make_image_view(vb.data(), w, h, 3), {}};
+    detector d(o);
+    const frame_report r = d.process(A, B);
+    CHECK(r.ok());
+    for (int c = 0; c < 3; ++c) {
+        CHECK(a[centre + c] > 0.9f);
+        CHECK(a[centre + c] < 1.1f);
+        CHECK(va[centre + c] > 0.0f);  // the variance's weights, squared, did not underflow
+        CHECK(std::isfinite(va[centre + c]));
+    }
+}

@@ -100,7 +100,10 @@ public:
 
     std::size_t computed() const noexcept { return computed_; }  // misses so far
     std::size_t hits() const noexcept { return hits_; }
+    // Under the cache's own lock: a detector asks at the end of each frame (scratch_bytes)
+    // while another detector sharing the cache may be filling it (a data race before).
     std::size_t bytes() const noexcept {
+        const std::lock_guard<std::mutex> lock(mutex_);
         std::size_t n = 0;
         for (const auto& t : tables_) n += t.chunks.size() * sizeof(chunk);
         return n;

@@ -412,10 +412,11 @@ private:
             }
         }
         clock.lap(frame_report::rebuild);
+        // A frame that could not be cleaned says so: pixels left with no source (an all-NaN
+        // frame) make the reconstruction's status non-ok. A frame whose only other pixels are
+        // black is cleaned (its NaN take the black they are among) and is ok.
         for (const half_report& hr : rep.half)
             if (!hr.reconstruction.ok()) rep.error = hr.reconstruction;
-        if (clean && rep.half[0].valid + rep.half[1].valid == 0 && rep.half[0].nonfinite + rep.half[1].nonfinite > 0)
-            rep.error = status{errc::no_valid_pixels, "no usable pixel in either half"};
         rep.scratch_bytes = scratch_bytes();
         return rep;
     }

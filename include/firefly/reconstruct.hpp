@@ -61,8 +61,11 @@ struct [[nodiscard]] reconstruct_report {
 inline status check_reconstruct_options(const reconstruct_options& o) noexcept {
     if (o.kernel_width < 3 || o.kernel_width % 2 == 0 || o.kernel_width > 63)
         return status{errc::invalid_argument, "kernel width must be odd and in [3, 63]"};
-    if (!(o.sigma > 0) || !std::isfinite(o.sigma))
-        return status{errc::invalid_argument, "kernel sigma must be positive"};
+    // Below 0.1 a neighbour's weight exp(-1 / (2 sigma^2)) and its square (the variance's
+    // weight) underflow: at 0.02 every weight is 0 and a pixel with eight valid neighbours
+    // "has no source"; a kernel that narrow is its nearest ring alone (kernel_width 3).
+    if (!(o.sigma >= 0.1) || !std::isfinite(o.sigma))
+        return status{errc::invalid_argument, "kernel sigma must be finite and at least 0.1"};
     if (!(o.tolerance >= 0) || o.max_iterations < 0)
         return status{errc::invalid_argument, "tolerance and iteration cap must be >= 0"};
     return ok_status();
