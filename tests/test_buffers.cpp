@@ -156,6 +156,25 @@ TEST_CASE("K buffers: a constant frame is left alone", "[buffers]") {
     }
 }
 
+TEST_CASE("K buffers: masks are one per buffer or none", "[buffers][errors]") {
+    // A vector of 2 masks for 4 buffers was read past its end by the checks and written past
+    // it by the mask writer (AddressSanitizer: heap-buffer-overflow, heap-use-after-free).
+    frame_k f = noisy_frame(4, 12, 9, 11);
+    f.color[2][7 * 3] = 500.0f;  // a firefly, so that a mask would be written
+    const frame_k before = f;
+    masks_k m(4, f.w, f.h);
+    for (const std::size_t n : {std::size_t{1}, std::size_t{2}, std::size_t{3}, std::size_t{5}}) {
+        std::vector<image_view<std::uint8_t>> masks(n, m.views[0]);
+        cross_buffer_detector d;
+        CHECK(d.process(f.views(), masks).error.code() == errc::size_mismatch);
+        CHECK(d.detect(f.views(), masks).error.code() == errc::size_mismatch);
+        CHECK(f.color == before.color);
+        CHECK(std::all_of(m.mem[0].begin(), m.mem[0].end(), [](std::uint8_t x) { return x == 0; }));
+    }
+    cross_buffer_detector d;
+    CHECK(d.process(f.views(), m.views).ok());  // one per buffer
+}
+
 TEST_CASE("K buffers: a firefly in one buffer is removed, nothing else moves", "[buffers]") {
     for (const int k : {3, 4, 8})
         for (const bool var : {true, false}) {

@@ -706,6 +706,36 @@ TEST_CASE("combine_halves: mean and variance of the mean", "[pipeline]") {
     CHECK(combine_halves(V(a), V(b), *make_image_view(small.data(), 2, 1, 1)).code() == errc::size_mismatch);
 }
 
+TEST_CASE("combine_halves: in place, or refused where an output overlaps otherwise", "[pipeline][errors]") {
+    // Half A's buffer of 5 one-channel pixels; the output one pixel further on overwrote
+    // elements still to be read: (0.5 0.25 0.125 0.0625) came out, ok, for the means (0.5 1 1.5 2).
+    std::vector<float> mem = {0, 1, 2, 3, 0}, b = {1, 1, 1, 1};
+    const std::vector<float> kept = mem;
+    const image_view<float> a = *make_image_view(mem.data(), 4, 1, 1), shifted = *make_image_view(mem.data() + 1, 4, 1, 1);
+    CHECK(combine_halves(a, *make_image_view(b.data(), 4, 1, 1), shifted).code() == errc::aliased_views);
+    CHECK(mem == kept);
+    // the output on the very input it replaces: element by element, as a separate output
+    REQUIRE(combine_halves(a, *make_image_view(b.data(), 4, 1, 1), a).ok());
+    CHECK(mem == std::vector<float>{0.5f, 1.0f, 1.5f, 2.0f, 0.0f});
+    // an output on a variance view is refused: the variance is read after the colour is written
+    std::vector<float> c = {1, 2, 3}, d = {3, 4, 5}, vc = {4, 4, 4}, vd = {8, 8, 8}, ov(3);
+    auto V = [](std::vector<float>& x) { return *make_image_view(x.data(), 1, 1, 3); };
+    CHECK(combine_halves(V(c), V(d), V(vc), V(vc), V(vd), V(ov)).code() == errc::aliased_views);
+    CHECK(vc == std::vector<float>{4, 4, 4});
+    REQUIRE(combine_halves(V(c), V(d), V(c), V(vc), V(vd), V(vc)).ok());  // both in place
+    CHECK(c == std::vector<float>{2, 3, 4});
+    CHECK(vc == std::vector<float>{3, 3, 3});
+}
+
+TEST_CASE("combine_halves: DBL_MAX variances give a finite variance of the mean", "[pipeline][numerics]") {
+    std::vector<double> a = {1}, b = {3}, va = {DBL_MAX}, vb = {DBL_MAX}, out(1), ov(1);
+    auto V = [](std::vector<double>& x) { return *make_image_view(x.data(), 1, 1, 1); };
+    REQUIRE(combine_halves(V(a), V(b), V(out), V(va), V(vb), V(ov)).ok());
+    CHECK(out[0] == 2.0);
+    CHECK(std::isfinite(ov[0]));  // vA / 4 + vB / 4 = DBL_MAX / 2 (the sum first overflowed)
+    CHECK(ov[0] == DBL_MAX / 2);
+}
+
 TEST_CASE("random frames: no NaN out, unmarked pixels untouched, layouts agree", "[pipeline][fuzz]") {
     std::uint64_t state = 0x9E3779B97F4A7C15ull;
     auto next = [&] {

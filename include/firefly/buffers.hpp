@@ -469,6 +469,7 @@ public:
     template <class C, class V>
     cross_buffer_report process(const std::vector<buffer_view<C, V>>& buffers,
                                 const std::vector<image_view<std::uint8_t>>& masks = {}) {
+        if (!masks.empty() && masks.size() != buffers.size()) return mask_count_mismatch();
         return process(buffers.data(), static_cast<int>(buffers.size()), masks.empty() ? nullptr : masks.data());
     }
     // Detection only: report and masks, the buffers unchanged (they may be const).
@@ -480,10 +481,19 @@ public:
     template <class C, class V>
     cross_buffer_report detect(const std::vector<buffer_view<C, V>>& buffers,
                                const std::vector<image_view<std::uint8_t>>& masks = {}) {
+        if (!masks.empty() && masks.size() != buffers.size()) return mask_count_mismatch();
         return detect(buffers.data(), static_cast<int>(buffers.size()), masks.empty() ? nullptr : masks.data());
     }
 
 private:
+    // Masks are one per buffer or none: with fewer, the checks and the writes read past the
+    // list (a vector of 2 masks for 4 buffers was read, then written, out of bounds).
+    static cross_buffer_report mask_count_mismatch() {
+        cross_buffer_report r;
+        r.error = status{errc::size_mismatch, "masks: one per buffer, or none"};
+        return r;
+    }
+
     template <class C, class V>
     status check_inputs(const buffer_view<C, V>* b, int k, const image_view<std::uint8_t>* masks) const {
         if (status st = check_cross_buffer_options(options_); !st.ok()) return st;

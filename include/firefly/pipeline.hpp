@@ -1555,8 +1555,23 @@ private:
     double frame_level_ = 0;           // log of the largest p-value the frame's decision keeps
 };
 
-// The final image of a frame, (A + B) / 2, and the variance of that mean, (vA + vB) / 4.
-// out_variance may be empty. Views must share size and channel counts.
+namespace detail {
+// The same elements in the same order: the same type, start and strides (sizes checked apart).
+template <class T, class U>
+bool same_elements(const image_view<T>& a, const image_view<U>& b) noexcept {
+    return std::is_same_v<std::remove_const_t<T>, std::remove_const_t<U>> &&
+           static_cast<const void*>(a.data()) == static_cast<const void*>(b.data()) &&
+           a.pixel_stride() == b.pixel_stride() && a.row_stride() == b.row_stride() &&
+           a.channel_stride() == b.channel_stride();
+}
+}  // namespace detail
+
+// The final image of a frame, (A + B) / 2, and the variance of that mean, vA / 4 + vB / 4 (a
+// quarter each first: FLT_MAX or DBL_MAX variances stay finite). out_variance may be empty.
+// Views must share size and channel counts. A written view may be the very input it replaces
+// (out on a or b, out_variance on var_a or var_b: each element is read before it is written)
+// and must otherwise share no memory with another view; a shifted overlap would overwrite
+// elements still to be read, and is refused (aliased_views) before anything is written.
 template <class T, class U>
 status combine_halves(const image_view<T>& a, const image_view<T>& b, const image_view<U>& out,
                       const image_view<T>& var_a = {}, const image_view<T>& var_b = {},
@@ -1568,12 +1583,21 @@ status combine_halves(const image_view<T>& a, const image_view<T>& b, const imag
     if (var && (!same_size(var_a, out_variance) || !same_size(var_b, out_variance) ||
                 var_a.channels() != out_variance.channels() || var_b.channels() != out_variance.channels()))
         return status{errc::size_mismatch, "combine: variance views do not match"};
+    auto apart = [](const auto& written, const auto& other, bool may_be_it) {
+        return !views_may_overlap(written, other) || (may_be_it && detail::same_elements(written, other));
+    };
+    bool ok = apart(out, a, true) && apart(out, b, true);
+    if (var)
+        ok = ok && apart(out, var_a, false) && apart(out, var_b, false) && apart(out, out_variance, false) &&
+             apart(out_variance, var_a, true) && apart(out_variance, var_b, true) && apart(out_variance, a, false) &&
+             apart(out_variance, b, false);
+    if (!ok) return status{errc::aliased_views, "combine: an output shares memory with another view"};
     for (int y = 0; y < a.height(); ++y)
         for (int x = 0; x < a.width(); ++x) {
             for (int c = 0; c < a.channels(); ++c) out.store(x, y, c, 0.5 * a.load(x, y, c) + 0.5 * b.load(x, y, c));
             if (var)
                 for (int c = 0; c < out_variance.channels(); ++c)
-                    out_variance.store(x, y, c, 0.25 * (var_a.load(x, y, c) + var_b.load(x, y, c)));
+                    out_variance.store(x, y, c, 0.25 * var_a.load(x, y, c) + 0.25 * var_b.load(x, y, c));
         }
     return ok_status();
 }
