@@ -116,17 +116,15 @@ public:
         std::vector<renamed> done;
         while (!files_.empty()) {
             const entry& f = files_.back();
-            renamed r{f.final_name, f.temp + ".old"};
             struct stat st {};
-            const bool existed = ::lstat(f.final_name.c_str(), &st) == 0;
-            if (!existed || ::link(f.final_name.c_str(), r.backup.c_str()) != 0) r.backup.clear();
+            renamed r{f.final_name, f.temp + ".old", ::lstat(f.final_name.c_str(), &st) == 0};
+            if (!r.replaced || ::link(f.final_name.c_str(), r.backup.c_str()) != 0) r.backup.clear();
             if (std::rename(f.temp.c_str(), f.final_name.c_str()) != 0) {
                 e = "cannot rename " + f.temp + " to " + f.final_name + ": " + std::strerror(errno);
                 if (!r.backup.empty()) ::unlink(r.backup.c_str());
                 undo(done);
                 return e;
             }
-            r.replaced = existed;
             done.push_back(std::move(r));
             files_.pop_back();
         }
@@ -148,7 +146,7 @@ private:
     };
     struct renamed {
         std::string final_name, backup;  // backup: a hard link to the file it replaced, or empty
-        bool replaced = false;
+        bool replaced = false;           // a file stood at final_name before the rename
     };
     // Takes back the renames of a commit that failed, last first.
     static void undo(const std::vector<renamed>& done) {

@@ -27,16 +27,8 @@ bool exists(const std::string& path) {
     return ::lstat(path.c_str(), &st) == 0;
 }
 
-// A fresh folder under the system's temporary folder.
-std::string fresh_folder() {
-    std::string t = (std::getenv("TMPDIR") ? std::string(std::getenv("TMPDIR")) : std::string("/tmp")) +
-                    "/firefly-outputs-XXXXXX";
-    REQUIRE(::mkdtemp(&t[0]) != nullptr);
-    return t;
-}
-
-// Every name in `dir` (no recursion), sorted, comma-separated.
-std::string listing(const std::string& dir) {
+// Every name in `dir` (no recursion), sorted.
+std::vector<std::string> names_in(const std::string& dir) {
     std::vector<std::string> names;
     if (DIR* d = ::opendir(dir.c_str())) {
         while (const dirent* e = ::readdir(d))
@@ -44,22 +36,28 @@ std::string listing(const std::string& dir) {
         ::closedir(d);
     }
     std::sort(names.begin(), names.end());
-    std::string out;
-    for (const std::string& n : names) out += (out.empty() ? "" : ",") + n;
-    return out;
+    return names;
 }
 
-// Removes the files of a flat folder (a directory among them: empty), then the folder.
-void remove_folder(const std::string& dir) {
-    std::string names = listing(dir);
-    for (std::size_t i = 0; i < names.size();) {
-        const std::size_t j = std::min(names.find(',', i), names.size());
-        const std::string p = dir + "/" + names.substr(i, j - i);
-        if (::unlink(p.c_str()) != 0) ::rmdir(p.c_str());
-        i = j + 1;
+// A fresh folder under the system's temporary folder holding kept.txt ("old"), removed with
+// whatever is in it (files, and directories left empty) when the test ends, passed or not.
+struct folder_with_kept_file {
+    std::string dir = (std::getenv("TMPDIR") ? std::string(std::getenv("TMPDIR")) : std::string("/tmp")) +
+                      "/firefly-outputs-XXXXXX";
+    folder_with_kept_file() {
+        REQUIRE(::mkdtemp(&dir[0]) != nullptr);
+        std::ofstream(dir + "/kept.txt") << "old";
     }
-    ::rmdir(dir.c_str());
-}
+    ~folder_with_kept_file() {
+        for (const std::string& n : names_in(dir)) {
+            const std::string p = dir + "/" + n;
+            if (::unlink(p.c_str()) != 0) ::rmdir(p.c_str());
+        }
+        ::rmdir(dir.c_str());
+    }
+    folder_with_kept_file(const folder_with_kept_file&) = delete;
+    folder_with_kept_file& operator=(const folder_with_kept_file&) = delete;
+};
 
 void write_text(firefly_tools::output_set& set, const std::string& path, const std::string& text) {
     int fd = -1;
@@ -70,8 +68,8 @@ void write_text(firefly_tools::output_set& set, const std::string& path, const s
 }  // namespace
 
 TEST_CASE("a commit whose last rename fails takes back the renames before it", "[tools][outputs]") {
-    const std::string dir = fresh_folder();
-    { std::ofstream(dir + "/kept.txt") << "old"; }
+    const folder_with_kept_file folder;
+    const std::string& dir = folder.dir;
     {
         firefly_tools::output_set set;
         // renamed last opened first: new.txt, then kept.txt, then "blocked"
@@ -85,13 +83,12 @@ TEST_CASE("a commit whose last rename fails takes back the renames before it", "
         CHECK_FALSE(exists(dir + "/new.txt"));         // the one it created is gone
     }
     // no temporary and no backup left once the set is gone
-    CHECK(listing(dir) == "blocked,kept.txt");
-    remove_folder(dir);
+    CHECK(names_in(dir) == std::vector<std::string>{"blocked", "kept.txt"});
 }
 
 TEST_CASE("a commit that succeeds replaces every file and leaves no backup", "[tools][outputs]") {
-    const std::string dir = fresh_folder();
-    { std::ofstream(dir + "/kept.txt") << "old"; }
+    const folder_with_kept_file folder;
+    const std::string& dir = folder.dir;
     {
         firefly_tools::output_set set;
         write_text(set, dir + "/kept.txt", "new");
@@ -100,6 +97,5 @@ TEST_CASE("a commit that succeeds replaces every file and leaves no backup", "[t
     }
     CHECK(read_file(dir + "/kept.txt") == "new");
     CHECK(read_file(dir + "/new.txt") == "made");
-    CHECK(listing(dir) == "kept.txt,new.txt");  // no temporary, no backup
-    remove_folder(dir);
+    CHECK(names_in(dir) == std::vector<std::string>{"kept.txt", "new.txt"});  // no temporary, no backup
 }
