@@ -194,7 +194,7 @@ inline void add_io_options(CLI::App& app, options& c, raw_args& r) {
                    "file after it is a render; the output's variance channels are named by --variance")
         ->type_name("FILE...")
         ->group("inputs");
-    app.add_option("--channels", r.channels, "colour channel names (three)")->type_name("NAMES")->default_str("R,G,B")->group("inputs");
+    app.add_option("--channels", r.channels, "colour channel names (three; in a multi-part EXR, PART.NAME where two parts hold NAME)")->type_name("NAMES")->default_str("R,G,B")->group("inputs");
     app.add_option("--variance", r.variance, "variance channel names (1 or 3; --renders: 3, written to the output)")->type_name("NAMES")
         ->default_str("Variance.R,Variance.G,Variance.B")
         ->group("inputs");

@@ -30,6 +30,8 @@
 #include <OpenEXR/ImfPartType.h>
 #include <OpenEXR/ImfIO.h>
 #include <OpenEXR/ImfInputFile.h>
+#include <OpenEXR/ImfInputPart.h>
+#include <OpenEXR/ImfMultiPartInputFile.h>
 #include <OpenEXR/ImfOutputFile.h>
 #include <OpenEXR/ImfStdIO.h>
 #include <OpenEXR/ImfThreading.h>
@@ -200,19 +202,22 @@ inline bool exr_attribute_sizes_fit(Imf::IStream& in, std::uint64_t stream_bytes
 
 // Reads the header only and checks what it claims before OpenEXR allocates for the image:
 // attribute sizes, the data window (each side at most 2^16) and the bytes of float samples.
-inline std::string exr_header_check(Imf::IStream& in, std::uint64_t stream_bytes, std::size_t channels_wanted) {
+// `multipart` tells whether the file holds several parts.
+inline std::string exr_header_check(Imf::IStream& in, std::uint64_t stream_bytes, std::size_t channels_wanted,
+                                    bool& multipart) {
     char head[8] = {0};
     if (stream_bytes < 8) return "is not an OpenEXR file";
     in.read(head, 8);
     if (head[0] != 0x76 || head[1] != 0x2f || head[2] != 0x31 || head[3] != 0x01) return "is not an OpenEXR file";
     int version = 0;
     std::memcpy(&version, head + 4, 4);
+    multipart = (version & 0x1000) != 0;
     if (!exr_attribute_sizes_fit(in, stream_bytes, version)) return "has a header attribute larger than the file";
     const std::uint64_t end = in.tellg();
     in.seekg(8);
     Imf::Header probe;
     probe.readFrom(in, version);
-    if (!(version & 0x1000) && in.tellg() != end) return "has a header OpenEXR reads differently from its sizes";
+    if (!multipart && in.tellg() != end) return "has a header OpenEXR reads differently from its sizes";
     const Imath::Box2i dw = probe.dataWindow();
     const std::int64_t w = std::int64_t{dw.max.x} - dw.min.x + 1, h = std::int64_t{dw.max.y} - dw.min.y + 1;
     if (w <= 0 || h <= 0 || w > max_side || h > max_side) return "has a bad data window";
@@ -326,7 +331,9 @@ inline void exr_scatter_line(const exr_chunk_layout& l, const std::uint8_t* p, i
 
 // Reads the pixels of an open file whose layout exr_layout_of accepted into out.pixels (sized,
 // nc channels): the chunks' stored bytes through OpenEXR, then unpacked on its thread pool.
-inline std::string exr_read_chunks(Imf::InputFile& file, const exr_chunk_layout& l, const Imath::Box2i& dw,
+// File: Imf::InputFile, or Imf::InputPart of a multi-part file.
+template <class File>
+std::string exr_read_chunks(File& file, const exr_chunk_layout& l, const Imath::Box2i& dw,
                                    std::size_t nc, image& out) {
     const int width = dw.max.x - dw.min.x + 1, height = dw.max.y - dw.min.y + 1;
     const std::size_t chunks = static_cast<std::size_t>((height + l.lines_per_chunk - 1) / l.lines_per_chunk);
@@ -371,46 +378,140 @@ inline std::string exr_read_chunks(Imf::InputFile& file, const exr_chunk_layout&
     return {};
 }
 
+// The output's size and windows from the data and display windows of the file (or of the
+// parts) its channels come from; false when the window is bad or too large for the file.
+inline bool exr_prepare(const Imath::Box2i& dw, const Imath::Box2i& disp, const std::vector<std::string>& names,
+                        std::uint64_t stream_bytes, image& out) {
+    const std::int64_t w = std::int64_t{dw.max.x} - dw.min.x + 1, h = std::int64_t{dw.max.y} - dw.min.y + 1;
+    if (w <= 0 || h <= 0 || w > max_side || h > max_side ||
+        !exr_size_plausible(static_cast<std::uint64_t>(w * h), names.size(), stream_bytes))
+        return false;
+    out.width = static_cast<int>(w);
+    out.height = static_cast<int>(h);
+    out.channels = names;
+    out.pixels.assign(static_cast<std::size_t>(w * h) * names.size(), 0.0f);
+    out.data_window = {dw.min.x, dw.min.y, dw.max.x, dw.max.y};
+    out.display_window = {disp.min.x, disp.min.y, disp.max.x, disp.max.y};
+    return true;
+}
+
+// Reads the channels `wanted` names from one file or part into `out` (prepared, its channels
+// interleaved in the order of `wanted`; an empty name is a channel another part holds).
+template <class File>
+std::string exr_read_part(File& file, const std::vector<std::string>& wanted, image& out) {
+    const Imath::Box2i dw = file.header().dataWindow();
+    const std::size_t nc = wanted.size();
+    const exr_chunk_layout layout = exr_layout_of(file.header(), wanted, out.width);
+    if (layout.lines_per_chunk > 0) return exr_read_chunks(file, layout, dw, nc, out);
+    // Slice::Make places the window's origin with integer (not pointer) arithmetic, so
+    // windows far from (0, 0) address nothing outside the buffer.
+    Imf::FrameBuffer fb;
+    for (std::size_t c = 0; c < nc; ++c)
+        if (!wanted[c].empty())
+            fb.insert(wanted[c].c_str(), Imf::Slice::Make(Imf::FLOAT, out.pixels.data() + c, dw, nc * sizeof(float),
+                                                          nc * sizeof(float) * static_cast<std::size_t>(out.width)));
+    file.setFrameBuffer(fb);
+    file.readPixels(dw.min.y, dw.max.y);
+    return {};
+}
+
+// A single-part file: every channel from its one header.
+inline std::string exr_read_single(Imf::IStream& in, std::uint64_t stream_bytes, const std::vector<std::string>& names,
+                                   image& out) {
+    Imf::InputFile file(in);
+    if (!exr_prepare(file.header().dataWindow(), file.header().displayWindow(), names, stream_bytes, out))
+        return "bad data window";
+    const std::string missing = exr_channels_missing(file.header(), names);
+    if (!missing.empty()) return missing;
+    return exr_read_part(file, names, out);
+}
+
+// Which part of a multi-part file holds each named channel (deep parts hold none): the one
+// part with a channel of that name, else PART.CHANNEL for a part named PART. Two parts with
+// the channel make the name ambiguous: the message asks for the part's name. `channel`
+// receives the name within its part.
+inline std::string exr_locate_channels(const Imf::MultiPartInputFile& mp, const std::vector<std::string>& names,
+                                       std::vector<int>& part, std::vector<std::string>& channel) {
+    auto has = [&](int p, const std::string& n) {
+        const Imf::Header& h = mp.header(p);
+        return !(h.hasType() && Imf::isDeepData(h.type())) && h.channels().findChannel(n.c_str()) != nullptr;
+    };
+    auto part_name = [&](int p) { return mp.header(p).hasName() ? mp.header(p).name() : "#" + std::to_string(p); };
+    std::string missing;
+    for (const auto& n : names) {
+        std::vector<int> hits;
+        std::vector<std::string> within;
+        for (int p = 0; p < mp.parts(); ++p)
+            if (has(p, n)) hits.push_back(p), within.push_back(n);
+        for (int p = 0; hits.empty() && p < mp.parts(); ++p) {
+            const std::string pn = mp.header(p).hasName() ? mp.header(p).name() : std::string();
+            if (!pn.empty() && n.size() > pn.size() + 1 && n.compare(0, pn.size(), pn) == 0 && n[pn.size()] == '.' &&
+                has(p, n.substr(pn.size() + 1)))
+                hits.push_back(p), within.push_back(n.substr(pn.size() + 1));
+        }
+        if (hits.size() > 1) {
+            std::string in;
+            for (int p : hits) in += (in.empty() ? "'" : ", '") + part_name(p) + "'";
+            return "channel " + n + " is in parts " + in + ": name it as PART." + n;
+        }
+        if (hits.empty()) {
+            missing += (missing.empty() ? "" : ", ") + n;
+            continue;
+        }
+        part.push_back(hits[0]);
+        channel.push_back(within[0]);
+    }
+    if (missing.empty()) return {};
+    std::string have;
+    for (int p = 0; p < mp.parts(); ++p) {
+        std::string list;
+        const Imf::ChannelList& cl = mp.header(p).channels();
+        for (auto it = cl.begin(); it != cl.end(); ++it) list += (list.empty() ? "" : ", ") + std::string(it.name());
+        have += (have.empty() ? "part '" : "; part '") + part_name(p) + "': " + list;
+    }
+    return "missing channel(s) " + missing + " (the file has " + have + ")";
+}
+
+// A multi-part file: each channel from the part exr_locate_channels finds; the parts read
+// must share one data window.
+inline std::string exr_read_multipart(Imf::IStream& in, std::uint64_t stream_bytes,
+                                      const std::vector<std::string>& names, image& out) {
+    Imf::MultiPartInputFile mp(in);
+    std::vector<int> part;
+    std::vector<std::string> channel;
+    if (std::string e = exr_locate_channels(mp, names, part, channel); !e.empty()) return e;
+    const Imf::Header& first = mp.header(part[0]);
+    for (int p : part)
+        if (mp.header(p).dataWindow() != first.dataWindow())
+            return "the parts that hold " + names[0] + " and the other channels have different data windows";
+    if (!exr_prepare(first.dataWindow(), first.displayWindow(), names, stream_bytes, out)) return "bad data window";
+    for (std::size_t c = 0; c < names.size(); ++c) {
+        if (std::find(part.begin(), part.begin() + static_cast<std::ptrdiff_t>(c), part[c]) != part.begin() + static_cast<std::ptrdiff_t>(c))
+            continue;  // read with an earlier channel of its part
+        std::vector<std::string> wanted(names.size());
+        for (std::size_t k = c; k < names.size(); ++k)
+            if (part[k] == part[c]) wanted[k] = channel[k];
+        Imf::InputPart reader(mp, part[c]);
+        if (std::string e = exr_read_part(reader, wanted, out); !e.empty()) return e;
+    }
+    return {};
+}
+
 // Reads the named channels (in that order) from an EXR stream of `stream_bytes` bytes; the
-// function the file reader and the fuzz target share. `name` labels the messages.
+// function the file reader and the fuzz target share. `name` labels the messages. In a
+// multi-part file a channel may come from any part (exr_locate_channels).
 inline std::string read_exr(Imf::IStream& in, std::uint64_t stream_bytes, const std::string& name,
                             const std::vector<std::string>& names, image& out) {
     try {
-        const std::string bad = exr_header_check(in, stream_bytes, names.size());
+        bool multipart = false;
+        const std::string bad = exr_header_check(in, stream_bytes, names.size(), multipart);
         if (!bad.empty()) return name + (bad[0] == 'i' ? " " : ": ") + bad;
         // OpenEXR's own header checks also refuse huge windows and tiles.
         Imf::Header::setMaxImageSize(max_side, max_side);
         Imf::Header::setMaxTileSize(max_side, max_side);
-        Imf::InputFile file(in);
-        const Imath::Box2i dw = file.header().dataWindow();
-        const std::int64_t w = std::int64_t{dw.max.x} - dw.min.x + 1, h = std::int64_t{dw.max.y} - dw.min.y + 1;
-        const std::size_t nc = names.size();
-        if (w <= 0 || h <= 0 || w > max_side || h > max_side ||
-            !exr_size_plausible(static_cast<std::uint64_t>(w * h), nc, stream_bytes))
-            return name + ": bad data window";
-        const std::string missing = exr_channels_missing(file.header(), names);
-        if (!missing.empty()) return name + ": " + missing;
-        out.width = static_cast<int>(w);
-        out.height = static_cast<int>(h);
-        out.channels = names;
-        out.pixels.assign(static_cast<std::size_t>(w * h) * nc, 0.0f);
-        const Imath::Box2i disp = file.header().displayWindow();
-        out.data_window = {dw.min.x, dw.min.y, dw.max.x, dw.max.y};
-        out.display_window = {disp.min.x, disp.min.y, disp.max.x, disp.max.y};
-        const exr_chunk_layout layout = exr_layout_of(file.header(), names, static_cast<int>(w));
-        if (layout.lines_per_chunk > 0) {
-            const std::string e = exr_read_chunks(file, layout, dw, nc, out);
-            return e.empty() ? e : name + ": " + e;
-        }
-        // Slice::Make places the window's origin with integer (not pointer) arithmetic, so
-        // windows far from (0, 0) address nothing outside the buffer.
-        Imf::FrameBuffer fb;
-        for (std::size_t c = 0; c < nc; ++c)
-            fb.insert(names[c].c_str(), Imf::Slice::Make(Imf::FLOAT, out.pixels.data() + c, dw, nc * sizeof(float),
-                                                         nc * sizeof(float) * static_cast<std::size_t>(w)));
-        file.setFrameBuffer(fb);
-        file.readPixels(dw.min.y, dw.max.y);
-        return {};
+        const std::string e = multipart ? exr_read_multipart(in, stream_bytes, names, out)
+                                        : exr_read_single(in, stream_bytes, names, out);
+        return e.empty() ? e : name + ": " + e;
     } catch (const std::bad_alloc&) {
         return name + ": out of memory";
     } catch (const std::exception& e) {

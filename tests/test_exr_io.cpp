@@ -3,7 +3,11 @@
 // Every file here is checked against OpenEXR's own FrameBuffer reader and writer.
 #include <catch2/catch.hpp>
 
+#include <OpenEXR/ImfMultiPartOutputFile.h>
+#include <OpenEXR/ImfOutputPart.h>
+#include <OpenEXR/ImfPartType.h>
 #include <OpenEXR/ImfStdIO.h>
+#include <OpenEXR/ImfTiledOutputPart.h>
 
 #include <algorithm>
 #include <cmath>
@@ -130,6 +134,68 @@ image test_image(int w, int h, int x0, int y0, const std::vector<std::string>& n
 
 bool same_bits(const std::vector<float>& a, const std::vector<float>& b) {
     return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
+}
+
+// One part of a multi-part file: its name, channels (all of one type), window, tiled or not.
+struct part_spec {
+    std::string name;
+    image img;
+    Imf::PixelType type;
+    Imf::Compression compression;
+    bool tiled;
+};
+
+// Writes the parts through OpenEXR's MultiPartOutputFile into a string; the display window
+// (one for the whole file) is the first part's data window.
+std::string imf_write_parts(const std::vector<part_spec>& parts) {
+    std::vector<Imf::Header> headers;
+    auto box = [](const image& img) {
+        return Imath::Box2i({img.data_window.min_x, img.data_window.min_y}, {img.data_window.max_x, img.data_window.max_y});
+    };
+    for (const auto& p : parts) {
+        Imf::Header h(box(parts[0].img), box(p.img));
+        h.setName(p.name);
+        h.compression() = p.compression;
+        h.setType(p.tiled ? Imf::TILEDIMAGE : Imf::SCANLINEIMAGE);
+        if (p.tiled) h.setTileDescription(Imf::TileDescription(8, 8, Imf::ONE_LEVEL));
+        for (const auto& n : p.img.channels) h.channels().insert(n, Imf::Channel(p.type));
+        headers.push_back(h);
+    }
+    Imf::StdOSStream os;
+    Imf::MultiPartOutputFile file(os, headers.data(), static_cast<int>(headers.size()));
+    for (std::size_t k = 0; k < parts.size(); ++k) {
+        const image& img = parts[k].img;
+        const Imath::Box2i dw = headers[k].dataWindow();
+        const std::size_t nc = img.channels.size(), w = static_cast<std::size_t>(img.width), n = img.pixels.size() / nc;
+        std::vector<std::vector<Imath::half>> halves(nc, std::vector<Imath::half>(n));
+        Imf::FrameBuffer fb;
+        for (std::size_t c = 0; c < nc; ++c) {
+            if (parts[k].type == Imf::HALF) {
+                for (std::size_t i = 0; i < n; ++i) halves[c][i] = Imath::half(img.pixels[i * nc + c]);
+                fb.insert(img.channels[c], Imf::Slice::Make(Imf::HALF, halves[c].data(), dw, 2, 2 * w));
+            } else {
+                fb.insert(img.channels[c], Imf::Slice::Make(Imf::FLOAT, img.pixels.data() + c, dw, nc * 4, nc * 4 * w));
+            }
+        }
+        if (parts[k].tiled) {
+            Imf::TiledOutputPart out(file, static_cast<int>(k));
+            out.setFrameBuffer(fb);
+            out.writeTiles(0, out.numXTiles() - 1, 0, out.numYTiles() - 1);
+        } else {
+            Imf::OutputPart out(file, static_cast<int>(k));
+            out.setFrameBuffer(fb);
+            out.writePixels(img.height);
+        }
+    }
+    return os.str();
+}
+
+// Channel c of an image, as float (half-rounded when the part stores half).
+std::vector<float> channel_of(const image& img, std::size_t c, bool half) {
+    std::vector<float> v;
+    for (std::size_t i = c; i < img.pixels.size(); i += img.channels.size())
+        v.push_back(half ? static_cast<float>(Imath::half(img.pixels[i])) : img.pixels[i]);
+    return v;
 }
 
 }  // namespace
@@ -303,4 +369,58 @@ TEST_CASE("write_exr then read_exr: any size, channel set, window and bit patter
         CHECK((back.data_window.min_x == img.data_window.min_x && back.data_window.max_y == img.data_window.max_y));
     }
     firefly_tools::set_exr_threads(0);
+}
+
+TEST_CASE("read_exr: a multi-part file's channels come from the part that holds them", "[exr_io]") {
+    // A renderer's AOVs as parts: the colour (float, ZIP) with alpha, the variance under the
+    // same names (half, tiled, PIZ), and a one-channel variance (no compression).
+    const image beauty = test_image(21, 19, -4, 7, {"A", "B", "G", "R"}, 11);
+    const image variance = test_image(21, 19, -4, 7, {"B", "G", "R"}, 12);
+    const image mean_var = test_image(21, 19, -4, 7, {"Variance"}, 13);
+    const std::string bytes = imf_write_parts({{"beauty", beauty, Imf::FLOAT, Imf::ZIP_COMPRESSION, false},
+                                               {"variance", variance, Imf::HALF, Imf::PIZ_COMPRESSION, true},
+                                               {"mean", mean_var, Imf::FLOAT, Imf::NO_COMPRESSION, false}});
+    for (unsigned threads : {0u, 2u}) {
+        firefly_tools::set_exr_threads(threads);
+        image back;
+        // Names shared by two parts are given with the part's name.
+        const std::vector<std::string> qualified{"beauty.R", "beauty.G", "beauty.B", "beauty.A", "variance.R",
+                                                 "variance.G", "variance.B"};
+        REQUIRE(tools_read(bytes, qualified, back).empty());
+        CHECK(back.width == 21);
+        CHECK(back.height == 19);
+        CHECK(back.data_window.min_x == -4);
+        CHECK(back.data_window.min_y == 7);
+        CHECK(back.channels == qualified);
+        const std::size_t from_beauty[] = {3, 2, 1, 0}, from_variance[] = {2, 1, 0};
+        for (std::size_t c = 0; c < 4; ++c) CHECK(same_bits(channel_of(back, c, false), channel_of(beauty, from_beauty[c], false)));
+        for (std::size_t c = 0; c < 3; ++c)
+            CHECK(same_bits(channel_of(back, 4 + c, false), channel_of(variance, from_variance[c], true)));
+        // A name only one part holds needs no part name.
+        REQUIRE(tools_read(bytes, {"Variance", "beauty.G"}, back).empty());
+        CHECK(same_bits(channel_of(back, 0, false), channel_of(mean_var, 0, false)));
+        CHECK(same_bits(channel_of(back, 1, false), channel_of(beauty, 2, false)));
+        REQUIRE(tools_read(bytes, {"A"}, back).empty());
+        CHECK(same_bits(channel_of(back, 0, false), channel_of(beauty, 0, false)));
+    }
+    firefly_tools::set_exr_threads(0);
+    image back;
+    std::string e = tools_read(bytes, {"R", "G", "B"}, back);
+    CHECK(e.find("channel R is in parts 'beauty', 'variance': name it as PART.R") != std::string::npos);
+    e = tools_read(bytes, {"beauty.R", "Z"}, back);
+    CHECK(e.find("missing channel(s) Z") != std::string::npos);
+    CHECK(e.find("part 'beauty': A, B, G, R; part 'variance': B, G, R; part 'mean': Variance") != std::string::npos);
+    e = tools_read(bytes, {"beauty.R", "nothing.R"}, back);
+    CHECK(e.find("missing channel(s) nothing.R") != std::string::npos);
+}
+
+TEST_CASE("read_exr: channels from parts with different windows are refused", "[exr_io]") {
+    const image beauty = test_image(8, 8, 0, 0, {"B", "G", "R"}, 1);
+    const image shifted = test_image(8, 8, 1, 0, {"Variance"}, 2);
+    const std::string bytes = imf_write_parts({{"beauty", beauty, Imf::FLOAT, Imf::ZIP_COMPRESSION, false},
+                                               {"variance", shifted, Imf::FLOAT, Imf::ZIP_COMPRESSION, false}});
+    image back;
+    CHECK(tools_read(bytes, {"R", "G", "B", "Variance"}, back).find("different data windows") != std::string::npos);
+    REQUIRE(tools_read(bytes, {"Variance"}, back).empty());  // one part alone: its own window
+    CHECK(back.data_window.min_x == 1);
 }

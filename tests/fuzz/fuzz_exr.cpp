@@ -37,11 +37,13 @@ private:
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-    // The channel sets the tool asks for: colour + variance (+ alpha), colour + one variance.
+    // The channel sets the tool asks for: colour + variance (+ alpha), colour + one variance,
+    // and a multi-part file's channels named with their parts' names.
     static const std::vector<std::string> sets[] = {
         {"R", "G", "B", "Variance.R", "Variance.G", "Variance.B", "A"},
         {"R", "G", "B", "Variance.R", "Variance.G", "Variance.B"},
         {"R", "G", "B", "Variance"},
+        {"beauty.R", "beauty.G", "beauty.B", "variance.R", "variance.G", "variance.B", "beauty.A"},
     };
     for (const auto& names : sets) {
         memory_istream in(data, size);
