@@ -2,6 +2,7 @@
 #include <firefly/firefly.hpp>
 #include <firefly/buffers.hpp>
 
+#include <algorithm>
 #include <cfloat>
 #include <cmath>
 #include <cstdint>
@@ -10,6 +11,7 @@
 #include <vector>
 
 #include "catch.hpp"
+#include "frame_views.hpp"
 
 using namespace firefly;
 
@@ -278,4 +280,101 @@ TEST_CASE("the narrowest kernel allowed still reads its neighbours", "[reconstru
         CHECK(va[centre + c] > 0.0f);  // the variance's weights, squared, did not underflow
         CHECK(std::isfinite(va[centre + c]));
     }
+}
+
+TEST_CASE("a variance of 0 says nothing: a noisy frame without fireflies is left alone", "[reliability][local]") {
+    // One sample a half, no variance written, or variances below what half floats store
+    // (6e-8): the local test once took 0 as an exact estimate, so every difference between the
+    // halves was significant and half the pixel-halves of a clean frame were rebuilt.
+    sim::scene s;
+    s.name = "zero_variance";
+    s.width = 64;
+    s.height = 48;
+    s.seed = 4;
+    s.spp = 16;
+    s.effects = sim::gradient;
+    s.samples = sim::distribution::gamma;
+    firefly_test::frame_views hv(sim::simulate(s));
+    for (int h = 0; h < 2; ++h) std::fill(hv.f.variance[h].begin(), hv.f.variance[h].end(), 0.0f);
+    const sim::frame before = hv.f;
+    for (const bool local : {true, false}) {
+        detector_options o;
+        o.local_test = local;
+        detector d(o);
+        hv.f = before;
+        const frame_report r = hv.process(d);
+        REQUIRE(r.error.ok());
+        CHECK(r.half[0].fireflies + r.half[1].fireflies == 0);
+        CHECK(hv.f.color[0] == before.color[0]);
+        CHECK(hv.f.color[1] == before.color[1]);
+    }
+    // A firefly there carries its own variance: still found and rebuilt.
+    hv.f = before;
+    const float e = hv.f.expected[hv.at(20, 20) * 3];
+    hv.set(0, 20, 20, 200.0f * e, 200.0f * e * 200.0f * e);
+    detector d;
+    REQUIRE(hv.process(d).error.ok());
+    CHECK((hv.mask[0][hv.at(20, 20)] & mask_bits::firefly) != 0);
+    CHECK(hv.col(0, 20, 20) < 5.0f * e);
+}
+
+TEST_CASE("a finite colour whose variance alone is not finite keeps its colour where no other half stands in",
+          "[reliability][reconstruct]") {
+    const int w = 24, h = 16;
+    std::vector<float> col[2], var[2];
+    for (int k = 0; k < 2; ++k) {
+        col[k] = noisy<float>(w, h, 3, 3u + static_cast<unsigned>(k), 0.5);
+        var[k] = noisy<float>(w, h, 3, 9u + static_cast<unsigned>(k), 0.01);
+    }
+    auto at = [&](int x, int y) { return (static_cast<std::size_t>(y) * w + static_cast<std::size_t>(x)) * 3; };
+    const float inf = std::numeric_limits<float>::infinity();
+    for (std::size_t c = 0; c < 3; ++c) {
+        var[0][at(5, 5) + c] = inf;  // both halves: kept, variance rebuilt
+        var[1][at(5, 5) + c] = inf;
+        var[0][at(12, 8) + c] = inf;  // one half: rebuilt from the other half
+        col[1][at(18, 10) + c] = std::numeric_limits<float>::quiet_NaN();  // with the other half's
+        var[0][at(18, 10) + c] = inf;                                     // variance alone bad
+    }
+    const std::vector<float> before[2] = {col[0], col[1]};
+    half_buffer<float> a{*make_image_view(col[0].data(), w, h, 3), *make_image_view(var[0].data(), w, h, 3), {}};
+    half_buffer<float> b{*make_image_view(col[1].data(), w, h, 3), *make_image_view(var[1].data(), w, h, 3), {}};
+    detector_options unblended;
+    unblended.blend_spatial = false;  // the other half's value as it is
+    detector d(unblended);
+    const frame_report r = d.process(a, b);
+    REQUIRE(r.error.ok());
+    for (std::size_t c = 0; c < 3; ++c) {
+        CHECK(col[0][at(5, 5) + c] == before[0][at(5, 5) + c]);
+        CHECK(col[1][at(5, 5) + c] == before[1][at(5, 5) + c]);
+        CHECK(col[0][at(12, 8) + c] == before[1][at(12, 8) + c]);
+        CHECK(col[0][at(18, 10) + c] == before[0][at(18, 10) + c]);
+        CHECK(std::isfinite(col[1][at(18, 10) + c]));
+        for (int k = 0; k < 2; ++k)
+            for (const std::size_t p : {at(5, 5), at(12, 8), at(18, 10)}) {
+                CHECK(std::isfinite(var[k][p + c]));
+                CHECK(var[k][p + c] >= 0.0f);
+            }
+    }
+    CHECK(r.half[0].repaired == 3);
+    CHECK(r.half[1].repaired == 2);
+
+    // Every variance Inf but one pixel's: each colour is its pixel's only estimate. The spatial
+    // rule once gave every pixel of both halves that one pixel's colour, with an ok status.
+    for (int k = 0; k < 2; ++k) {  // into the same storage: a and b view it
+        const std::vector<float> fresh_colour = noisy<float>(w, h, 3, 5u + static_cast<unsigned>(k), 0.5);
+        std::copy(fresh_colour.begin(), fresh_colour.end(), col[k].begin());
+        std::fill(var[k].begin(), var[k].end(), inf);
+    }
+    for (std::size_t c = 0; c < 3; ++c) col[0][at(7, 7) + c] = 1000.0f, var[0][at(7, 7) + c] = 1e6f;
+    const std::vector<float> input[2] = {col[0], col[1]};
+    detector fresh;
+    const frame_report all = fresh.process(a, b);
+    REQUIRE(all.error.ok());
+    for (int k = 0; k < 2; ++k)
+        for (std::size_t i = 0; i < col[k].size(); ++i) {
+            INFO("half " << k << ", pixel " << i / 3 << ", channel " << i % 3);
+            // (half B's pixel under the valid one is bad in B alone: the other half stands in)
+            CHECK(col[k][i] == (k == 1 && i / 3 == at(7, 7) / 3 ? input[0][i] : input[k][i]));
+            CHECK(std::isfinite(var[k][i]));
+        }
 }

@@ -204,6 +204,14 @@ namespace detail {
 // rounding, so a smaller relative sd is not information (and m stays finite).
 inline constexpr double min_relative_variance = 1e-14;
 
+// Whether a pixel's r says something about its neighbourhood's noise: above the floor. A
+// variance of 0 (one sample a half, no variance written, or one too small for its storage:
+// half floats flush below 6e-8) sits at the floor; pooled, such pixels made the
+// neighbourhood's noise near 0, so every difference of the halves was significant (half the
+// pixel-halves of a noisy frame without fireflies flagged). The pixel's own r still bounds its
+// other half's test from below and still flags a 1e30 beside ordinary pixels.
+inline bool informative(float r) noexcept { return r > static_cast<float>(min_relative_variance); }
+
 // Level (mean colour) and relative variance of one pixel; false when it does not count. NC > 0:
 // the channel count known at compile time (the loop unrolled; the same operations in the same
 // order as for nc = NC).
@@ -469,7 +477,7 @@ inline pooled_estimate pooled_relative_variance(const std::vector<float> (&rel_v
     std::size_t count = 0;
     for_each_neighbour(w, h, x, y, radius, [&](std::size_t j) {
         for (int half = 0; half < 2; ++half)
-            if (rv[half][j] == rv[half][j]) p[count++] = std::log(rv[half][j]);
+            if (informative(rv[half][j])) p[count++] = std::log(rv[half][j]);
     });
     pooled_estimate e;
     if (count < static_cast<std::size_t>(std::max(min_count, 1))) return e;
@@ -555,13 +563,14 @@ inline double neighbourhood_line_level(const std::vector<double> (&level)[2], in
 // where fireflies are dense (a firefly lands in one half and lifts that half's r with its
 // level, so the median over both halves rises with them; of two halves at one level, the
 // smaller r). NaN when fewer than min_count neighbours count; count: how many did (both
-// halves' levels usable and the lower half's r).
+// halves' levels usable and the lower half's r informative).
 inline double neighbourhood_lower_noise(const local_test_scratch& s, int w, int h, int x, int y, int radius,
                                         int min_count, std::vector<float>& pool, std::size_t& count) {
     return neighbour_median(w, h, x, y, radius, min_count, pool, [&](std::size_t j) {
         const double a = s.level[0][j], b = s.level[1][j];
         if (!(a == a && b == b)) return std::numeric_limits<float>::quiet_NaN();
-        return a < b ? s.rel_var[0][j] : b < a ? s.rel_var[1][j] : std::min(s.rel_var[0][j], s.rel_var[1][j]);
+        const float r = a < b ? s.rel_var[0][j] : b < a ? s.rel_var[1][j] : std::min(s.rel_var[0][j], s.rel_var[1][j]);
+        return informative(r) ? r : std::numeric_limits<float>::quiet_NaN();
     }, count);
 }
 
