@@ -152,6 +152,20 @@ TEST_CASE("accumulator: views go straight to the detector; errors as status", "[
     REQUIRE(r.ok());
     CHECK(r.per_buffer[1] >= 1);
     CHECK(acc.color(1)(3, 4) < 1.0f);
+    // The readers outside the buffers or the image: 0 samples, empty views (they read past
+    // their vectors: AddressSanitizer, heap-buffer-overflow).
+    CHECK(acc.samples(1, 3, 4) == 8);
+    for (const int b : {-1, 4})
+        for (const int x : {-1, 0, 8}) CHECK(acc.samples(b, x, 0) == 0);
+    CHECK(acc.samples(0, 8, 0) == 0);
+    CHECK(acc.samples(0, 0, -1) == 0);
+    CHECK(acc.color(4).empty());
+    CHECK(acc.variance(-1).empty());
+    CHECK_FALSE(acc.color(3).empty());
+    sample_accumulator unset;
+    CHECK(unset.samples(0, 0, 0) == 0);
+    CHECK(unset.color(0).empty());
+    CHECK(unset.views().empty());
 }
 
 // Property: on random sample streams (magnitudes from denormals to 1e30, both signs, zeros,

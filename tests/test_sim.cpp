@@ -6,7 +6,9 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <climits>
 #include <cstring>
+#include <limits>
 #include <string>
 #include <utility>
 #include <vector>
@@ -669,4 +671,55 @@ TEST_CASE("the simulator's normal numbers follow the normal law", "[sim][samples
     CHECK(sum / n == Approx(0.0).margin(0.005));
     CHECK(sq / n == Approx(1.0).epsilon(0.005));
     CHECK(static_cast<double>(beyond3) / n == Approx(0.0026998).epsilon(0.06));  // 2 P(Z > 3), +-3 s.e.
+}
+
+TEST_CASE("scene options at int's limits and beyond: no overflow, the same frames within them", "[sim][errors]") {
+    // 2 x spp overflowed at INT_MAX (each buffer then simulated with 2 samples), and a bucket's
+    // corner, side or a wide highlight's radius far past the frame cast out of int's range
+    // (UndefinedBehaviorSanitizer: signed overflow, float-cast-overflow).
+    sim::scene empty;
+    empty.width = empty.height = 0;
+    empty.spp = INT_MAX;
+    const sim::buffers b = sim::simulate_buffers(empty, 2);
+    REQUIRE(b.spp.size() == 2);
+    CHECK(b.spp[0] == INT_MAX);
+    CHECK(b.spp[1] == INT_MAX);
+    const sim::buffers three = sim::simulate_buffers(empty, 3);
+    CHECK(three.spp[0] + std::int64_t{three.spp[1]} + three.spp[2] == 2 * std::int64_t{INT_MAX});
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    for (const double far : {1e12, -1e12, nan, 1e300}) {
+        sim::scene s = sim::named_scene("failed_bucket", 24, 16, 3);
+        s.effects |= sim::wide_highlight;
+        s.spp = 4;
+        s.bucket_x = s.bucket_y = far;
+        s.bucket_size = far;
+        s.wide_radius = far;
+        const sim::frame f = sim::simulate(s);
+        CHECK(f.color[0].size() == 24u * 16u * 3u);
+    }
+    // Within the limits nothing moves: the default bucket, as before.
+    sim::scene d = sim::named_scene("failed_bucket", 64, 48, 3);
+    const sim::frame f = sim::simulate(d);
+    std::size_t nan_pixels = 0;
+    for (std::size_t i = 0; i < f.pixels(); ++i) nan_pixels += f.nonfinite[0].empty() ? 0 : f.nonfinite[0][i];
+    CHECK(nan_pixels == 8u * 8u);  // 1/8 of the width, square
+}
+
+TEST_CASE("metrics: cleaned images that do not fit the frame give NaN, never a read past them", "[sim][metrics][errors]") {
+    const sim::buffers f = sim::simulate_buffers(sim::named_scene("sparse_fireflies", 16, 12, 2), 3);
+    std::vector<std::vector<float>> two(f.color.begin(), f.color.begin() + 2);
+    CHECK(std::isnan(sim::evaluate_buffers(f, two).relmse));  // one buffer short: divided by all three's samples
+    std::vector<std::vector<float>> short_one = f.color;
+    short_one[1].resize(10);
+    CHECK(std::isnan(sim::evaluate_buffers(f, short_one).recall));
+    CHECK(std::isnan(sim::combine(f, short_one)[0]));
+    CHECK(sim::evaluate_buffers(f, f.color).relmse >= 0);
+    const sim::frame h = sim::simulate(sim::named_scene("sparse_fireflies", 16, 12, 2));
+    const std::vector<float> cut(h.color[1].begin(), h.color[1].end() - 3);
+    const std::vector<float>* cleaned[2] = {&h.color[0], &cut};
+    CHECK(std::isnan(sim::evaluate(h, cleaned).relmse));
+    const std::vector<float>* none[2] = {&h.color[0], nullptr};
+    CHECK(std::isnan(sim::evaluate(h, none).false_positive));
+    const std::vector<float>* whole[2] = {&h.color[0], &h.color[1]};
+    CHECK(sim::evaluate(h, whole).relmse >= 0);
 }

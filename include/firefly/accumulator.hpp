@@ -61,10 +61,13 @@ public:
                2 * static_cast<std::size_t>(k_) * (color_.empty() ? 0 : color_[0].capacity()) * sizeof(float);
     }
 
-    // One sample (channels() values) of pixel (x, y), the pixel's sample_index-th.
+    // One sample (channels() values) of pixel (x, y), the pixel's sample_index-th. A buffer
+    // pixel holds at most 2^32 - 1 samples (its count is 32-bit): one more is refused
+    // (size_overflow), where the count once wrapped to 0 and the mean turned NaN.
     status add(int x, int y, std::uint64_t sample_index, const float* value) noexcept {
         if (x < 0 || y < 0 || x >= w_ || y >= h_ || value == nullptr)
             return status{errc::invalid_argument, "accumulator: sample outside the image"};
+        if (count_[cell_of(x, y, sample_index)] == UINT32_MAX) return full();
         add_unchecked(x, y, sample_index, value);
         return ok_status();
     }
@@ -77,6 +80,9 @@ public:
         if (tile.channels() != nc_) return status{errc::channel_mismatch, "accumulator: tile channels differ"};
         if (x0 < 0 || y0 < 0 || x0 > w_ - tile.width() || y0 > h_ - tile.height())
             return status{errc::invalid_argument, "accumulator: tile outside the image"};
+        for (int j = 0; j < tile.height(); ++j)  // all of the tile or nothing
+            for (int i = 0; i < tile.width(); ++i)
+                if (count_[cell_of(x0 + i, y0 + j, sample_index)] == UINT32_MAX) return full();
         float v[4];
         for (int j = 0; j < tile.height(); ++j)
             for (int i = 0; i < tile.width(); ++i) {
@@ -108,13 +114,17 @@ public:
             }
     }
 
-    // Samples in buffer b at (x, y).
+    // Samples in buffer b at (x, y); 0 outside the buffers or the image.
     std::uint32_t samples(int b, int x, int y) const noexcept {
+        if (b < 0 || b >= k_ || x < 0 || y < 0 || x >= w_ || y >= h_) return 0;
         return count_[pixel(x, y) * static_cast<std::size_t>(k_) + static_cast<std::size_t>(b)];
     }
-    // Buffer b's mean colour and variance of the mean (after finish()), packed interleaved.
-    image_view<float> color(int b) noexcept { return view(color_[static_cast<std::size_t>(b)]); }
-    image_view<float> variance(int b) noexcept { return view(variance_[static_cast<std::size_t>(b)]); }
+    // Buffer b's mean colour and variance of the mean (after finish()), packed interleaved;
+    // empty for b outside [0, buffers()).
+    image_view<float> color(int b) noexcept { return b >= 0 && b < k_ ? view(color_[static_cast<std::size_t>(b)]) : image_view<float>{}; }
+    image_view<float> variance(int b) noexcept {
+        return b >= 0 && b < k_ ? view(variance_[static_cast<std::size_t>(b)]) : image_view<float>{};
+    }
     // All K buffers for cross_buffer_detector::process().
     std::vector<buffer_view<float>> views() {
         std::vector<buffer_view<float>> v;
@@ -131,9 +141,14 @@ private:
                                             static_cast<std::ptrdiff_t>(sizeof(float)) * nc_ * w_,
                                             static_cast<std::ptrdiff_t>(sizeof(float)));
     }
+    std::size_t cell_of(int x, int y, std::uint64_t sample_index) const noexcept {
+        return pixel(x, y) * static_cast<std::size_t>(k_) + static_cast<std::size_t>(sample_index % static_cast<std::uint64_t>(k_));
+    }
+    static status full() noexcept {
+        return status{errc::size_overflow, "accumulator: 2^32 - 1 samples in one pixel of one buffer"};
+    }
     void add_unchecked(int x, int y, std::uint64_t sample_index, const float* value) noexcept {
-        const std::size_t cell = pixel(x, y) * static_cast<std::size_t>(k_) +
-                                 static_cast<std::size_t>(sample_index % static_cast<std::uint64_t>(k_));
+        const std::size_t cell = cell_of(x, y, sample_index);
         const double n = ++count_[cell];
         double* mean = &mean_[cell * static_cast<std::size_t>(nc_)];
         double* m2 = &m2_[cell * static_cast<std::size_t>(nc_)];

@@ -1179,11 +1179,19 @@ private:
         return given;
     }
 
-    // The mean of the k buffers' channel c at (x, y) where positive and finite, else 0.
+    // The mean of the k buffers' channel c at (x, y) where positive and finite, else 0. Summed
+    // in ascending order, not the buffers' (values of very different magnitudes round
+    // differently in another order): a permutation of the buffers gives the same bits.
     template <class C, class V>
     static double positive_mean(const buffer_view<C, V>* b, int k, int x, int y, int c) {
+        double v[detail::max_buffers];
+        for (int i = 0; i < k; ++i) {
+            v[i] = b[i].color.load(x, y, c);
+            if (!std::isfinite(v[i])) return 0.0;  // (the sum would not be finite either)
+        }
+        detail::sort_small(v, static_cast<std::size_t>(k));
         double sum = 0;
-        for (int i = 0; i < k; ++i) sum += b[i].color.load(x, y, c);
+        for (int i = 0; i < k; ++i) sum += v[i];
         const double m = sum / k;
         return std::isfinite(m) && m > 0 ? m : 0.0;
     }

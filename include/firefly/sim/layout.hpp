@@ -44,6 +44,13 @@ struct pixel_model {
 };
 
 // Mean of the firefly ratio: U[0.5, 1.5) x E, or log-uniform on [E, E_max).
+// A pixel coordinate or length from a double option: clamped to [lo, hi] first (NaN: lo), so
+// that no option value casts out of int's range.
+inline int clamped_int(double v, int lo, int hi) noexcept {
+    if (!(v >= lo)) return lo;
+    return v <= hi ? static_cast<int>(v) : hi;
+}
+
 inline double mean_ratio(const scene& sc) noexcept {
     const double lo = sc.firefly_energy, hi = sc.firefly_energy_max;
     return hi > lo && lo > 0 ? (hi - lo) / std::log(hi / lo) : lo;
@@ -74,9 +81,10 @@ public:
                 log_ramp_.push_back(0.02 * std::pow(1000.0, w_ > 1 ? static_cast<double>(x) / (w_ - 1) : 0.5));
         const double m = std::min(w_, h_);
         region_ = {sc.region_x0 * w_, sc.region_y0 * h_, sc.region_x1 * w_, sc.region_y1 * h_, sc.region_radius * m};
-        const int side = static_cast<int>(std::lround(sc.bucket_size * w_));
-        bx_ = static_cast<int>(sc.bucket_x * w_);
-        by_ = static_cast<int>(sc.bucket_y * h_);
+        // (a bucket is at most the frame's size and starts within a frame's size of it)
+        const int side = clamped_int(std::round(sc.bucket_size * w_), 0, std::max(w_, h_));
+        bx_ = clamped_int(sc.bucket_x * w_, -w_, w_);
+        by_ = clamped_int(sc.bucket_y * h_, -h_, h_);
         bx1_ = bx_ + side;
         by1_ = by_ + side;
     }
@@ -183,8 +191,8 @@ private:
         }
         if (fx_ & wide_highlight) {
             const double wr = sc_.wide_radius * std::min(w_, h_), wx = 0.3 * w_, wy = 0.35 * h_;
-            for (int y = std::max(0, static_cast<int>(wy - wr) - 1); y < std::min(h_, static_cast<int>(wy + wr) + 2); ++y)
-                for (int x = std::max(0, static_cast<int>(wx - wr) - 1); x < std::min(w_, static_cast<int>(wx + wr) + 2); ++x)
+            for (int y = clamped_int(wy - wr - 1, 0, h_); y < clamped_int(wy + wr + 2, 0, h_); ++y)
+                for (int x = clamped_int(wx - wr - 1, 0, w_); x < clamped_int(wx + wr + 2, 0, w_); ++x)
                     if (std::hypot(x + 0.5 - wx, y + 0.5 - wy) <= wr) mark(x, y, wide_highlight);
         }
     }
@@ -193,7 +201,7 @@ private:
     void place_caustics() {
         counter_rng r(sc_.seed, stream_of(caustics), 0, 0);
         const double m = std::min(w_, h_);
-        const int blobs = (sc_.caustic_count * 3 + 4) / 5;
+        const std::int64_t blobs = (std::int64_t{sc_.caustic_count} * 3 + 4) / 5;
         for (int k = 0; k < sc_.caustic_count; ++k) {
             const double x0 = (0.15 + 0.7 * r.uniform()) * w_, y0 = (0.15 + 0.7 * r.uniform()) * h_;
             if (k < blobs) {

@@ -173,6 +173,24 @@ accuracy evaluate_counts(const Truth& t, int k, Orig orig, Clean clean) {
     return a;
 }
 
+// Whether every cleaned image holds the frame's RGB pixels (the metrics read them whole), and
+// there is one per buffer.
+inline bool cleaned_fit(std::size_t pixels, const std::vector<float>* const* cleaned, std::size_t n, std::size_t k) {
+    if (n != k) return false;
+    for (std::size_t b = 0; b < n; ++b)
+        if (!cleaned[b] || cleaned[b]->size() != pixels * 3) return false;
+    return true;
+}
+
+// Metrics of a call whose cleaned images do not fit: every one NaN (never a read past them).
+inline accuracy unfit() {
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    accuracy a;
+    a.recall = a.precision = a.false_positive = a.highlight_kept = a.relmse = nan;
+    a.energy = a.energy_highlight = a.energy_rest = nan;
+    return a;
+}
+
 inline void set_combined(accuracy& a, const combined_accuracy& c) {
     a.relmse = c.relmse;
     a.energy = c.energy;
@@ -181,8 +199,10 @@ inline void set_combined(accuracy& a, const combined_accuracy& c) {
 }
 }  // namespace detail
 
-// `original` is the simulated frame, `cleaned_color[h]` the cleaned RGB colour of half h.
+// `original` is the simulated frame, `cleaned_color[h]` the cleaned RGB colour of half h (the
+// frame's size; else every metric is NaN).
 inline accuracy evaluate(const frame& original, const std::vector<float>* const cleaned_color[2]) {
+    if (!cleaned_color || !detail::cleaned_fit(original.pixels(), cleaned_color, 2, 2)) return detail::unfit();
     accuracy a = detail::evaluate_counts(
         original, 2, [&](int b) { return &original.color[b]; }, [&](int b) { return cleaned_color[b]; });
     const std::size_t np = original.pixels();
@@ -193,8 +213,13 @@ inline accuracy evaluate(const frame& original, const std::vector<float>* const 
     return a;
 }
 
-// The combined image of K buffers: their mean weighted by samples (the estimate of all samples).
+// The combined image of K buffers: their mean weighted by samples (the estimate of all samples);
+// NaN unless `color` holds every buffer at the frame's size.
 inline std::vector<float> combine(const buffers& original, const std::vector<std::vector<float>>& color) {
+    std::vector<const std::vector<float>*> p;
+    for (const auto& c : color) p.push_back(&c);
+    if (!detail::cleaned_fit(original.pixels(), p.data(), p.size(), static_cast<std::size_t>(original.count())))
+        return std::vector<float>(original.pixels() * 3, std::numeric_limits<float>::quiet_NaN());
     std::vector<float> out(original.pixels() * 3, 0.0f);
     double total = 0;
     for (int s : original.spp) total += s;
@@ -205,9 +230,14 @@ inline std::vector<float> combine(const buffers& original, const std::vector<std
     return out;
 }
 
-// K buffers: `cleaned[b]` is buffer b's cleaned RGB colour (as many as original.count()).
+// K buffers: `cleaned[b]` is buffer b's cleaned RGB colour (as many as original.count(), each
+// the frame's size; else every metric is NaN).
 inline accuracy evaluate_buffers(const buffers& original, const std::vector<std::vector<float>>& cleaned) {
-    const int k = std::min(original.count(), static_cast<int>(cleaned.size()));
+    std::vector<const std::vector<float>*> p;
+    for (const auto& c : cleaned) p.push_back(&c);
+    if (!detail::cleaned_fit(original.pixels(), p.data(), p.size(), static_cast<std::size_t>(original.count())))
+        return detail::unfit();
+    const int k = original.count();
     accuracy a = detail::evaluate_counts(
         original, k, [&](int b) { return &original.color[b]; }, [&](int b) { return &cleaned[b]; });
     const std::vector<float> combined = combine(original, cleaned);

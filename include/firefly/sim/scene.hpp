@@ -204,8 +204,8 @@ inline std::uint32_t damage_pixel(const pixel_model& p, int x, std::size_t i, in
 inline void allocate(const scene& sc, int k, buffers& f) {
     const std::size_t np = f.pixels();
     const std::uint32_t fx = sc.effects;
-    const int total = 2 * std::max(sc.spp, 2);
-    for (int b = 0; b < k; ++b) f.spp.push_back(std::max(total / k + (b < total % k ? 1 : 0), 2));
+    const std::int64_t total = 2 * std::int64_t{std::max(sc.spp, 2)};  // (no overflow at INT_MAX)
+    for (int b = 0; b < k; ++b) f.spp.push_back(static_cast<int>(std::max<std::int64_t>(total / k + (b < total % k ? 1 : 0), 2)));
     f.color.assign(static_cast<std::size_t>(k), std::vector<float>(np * 3, 0.0f));
     f.variance = f.color;
     f.firefly_energy.assign(static_cast<std::size_t>(k), std::vector<float>());
