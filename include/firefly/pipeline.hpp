@@ -256,8 +256,8 @@ public:
                  h.select.capacity() * sizeof(double) + h.order.capacity() * sizeof(std::uint32_t) +
                  h.removed.capacity() * sizeof(double) + (h.keys.capacity() + h.keys_tmp.capacity()) * sizeof(std::uint64_t) +
                  (h.fix.capacity() + h.cross.capacity() + h.left.capacity() + h.dropped.capacity() +
-                  h.implausible.capacity() + h.kept.capacity()) * sizeof(std::uint32_t) +
-                 (h.cross_values.capacity() + h.kept_values.capacity()) * sizeof(double) + h.decision.capacity() +
+                  h.implausible.capacity()) * sizeof(std::uint32_t) +
+                 h.cross_values.capacity() * sizeof(double) + h.decision.capacity() +
                  h.band_counts.capacity() * sizeof(stddev_counts) + h.before.capacity() * sizeof(float) + h.added.capacity() +
                  h.held.capacity() * sizeof(std::uint32_t) + h.held_values.capacity() * sizeof(float) + h.held_shares.capacity() +
                  h.recon.bytes();
@@ -322,8 +322,6 @@ private:
         std::vector<std::uint32_t> left;     // pixels to rebuild that nothing reached (this frame)
         std::vector<std::uint32_t> dropped;  // find_dropped: this half's dropped pixels, row-major
         std::vector<std::uint32_t> implausible;  // find_implausible: its implausible pixels, row-major
-        std::vector<std::uint32_t> kept;     // rebuilt spatially with their finite colour kept
-        std::vector<double> kept_values;     // (keep_finite_colour): that colour, entry x channel
         reconstruct_scratch recon;
     };
 
@@ -1487,13 +1485,8 @@ private:
             return pixel_role::source;
         };
         constexpr std::uint8_t interesting = fix_bit | other_half_bit | outlier_bit | nonfinite_class;
-        keep_finite_colour(hb, s);
         const reconstruct_report rr =
             reconstruct(hb.color, hb.variance, label, options_.reconstruction, s.recon, interesting, role);
-        for (std::size_t e = 0; e < s.kept.size(); ++e)
-            for (int c = 0; c < nc; ++c)
-                hb.color.store(detail::column_of(s.kept[e], w), detail::row_of(s.kept[e], w), c,
-                               s.kept_values[e * static_cast<std::size_t>(nc) + static_cast<std::size_t>(c)]);
         r.phase1_rounds = rr.phase1_rounds;
         r.phase2_iterations = rr.phase2_iterations;
         r.final_change = rr.final_change;
@@ -1506,30 +1499,6 @@ private:
             if (left) s.left.push_back(p);
         }
         r.repaired = repaired;
-    }
-
-    // A pixel to rebuild spatially (bad in both halves, or rebuild = spatial) that is
-    // non-finite by its variance or alpha alone keeps its colour, the only estimate there:
-    // only its variance is rebuilt. The spatial rule fills a value nothing measured; a finite
-    // colour was measured (a frame whose variances were all Inf, one pixel's aside, once took
-    // that pixel's colour everywhere with an ok status). Dropped (black) and implausible
-    // pixels are not measurements: rebuilt whole. Listed in s.kept with their colour.
-    template <class C, class V, class A>
-    void keep_finite_colour(const half_buffer<C, V, A>& hb, half_state& s) const {
-        s.kept.clear();
-        s.kept_values.clear();
-        const int w = hb.color.width(), nc = hb.color.channels();
-        for (const std::uint32_t p : s.fix) {
-            if (!(s.label[p] & fix_bit) || cls(s.label[p]) != nonfinite_class) continue;
-            const int x = detail::column_of(p, w), y = detail::row_of(p, w);
-            bool finite = true;
-            for (int c = 0; c < nc; ++c) finite = finite && std::isfinite(static_cast<double>(hb.color.load(x, y, c)));
-            if (!finite || std::binary_search(s.dropped.begin(), s.dropped.end(), p) ||
-                std::binary_search(s.implausible.begin(), s.implausible.end(), p))
-                continue;
-            s.kept.push_back(p);
-            for (int c = 0; c < nc; ++c) s.kept_values.push_back(hb.color.load(x, y, c));
-        }
     }
 
     static void write_mask(const half_state& s, const image_view<std::uint8_t>& mask) {
