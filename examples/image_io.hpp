@@ -426,24 +426,25 @@ inline std::string exr_read_single(Imf::IStream& in, std::uint64_t stream_bytes,
     return exr_read_part(file, names, out);
 }
 
-// Which part of a multi-part file holds each named channel (deep parts hold none): the one
-// part with a channel of that name, else PART.CHANNEL for a part named PART. Two parts with
-// the channel make the name ambiguous: the message asks for the part's name. `channel`
-// receives the name within its part.
+// Which part of a multi-part file holds each named channel (deep parts hold none): a part
+// with a channel of that name, or a part named PART holding CHANNEL for PART.CHANNEL. A name
+// with more than one reading (two parts hold it, or it is a channel's name and PART.CHANNEL
+// too) is refused with every reading, as are two names that read one channel. `part` and
+// `channel` receive the part and the name within it.
 inline std::string exr_locate_channels(const Imf::MultiPartInputFile& mp, const std::vector<std::string>& names,
                                        std::vector<int>& part, std::vector<std::string>& channel) {
-    auto has = [&](int p, const std::string& n) {
+    auto flat = [&](int p) {
         const Imf::Header& h = mp.header(p);
-        return !(h.hasType() && Imf::isDeepData(h.type())) && h.channels().findChannel(n.c_str()) != nullptr;
+        return !(h.hasType() && Imf::isDeepData(h.type()));
     };
+    auto has = [&](int p, const std::string& n) { return flat(p) && mp.header(p).channels().findChannel(n.c_str()) != nullptr; };
     auto part_name = [&](int p) { return mp.header(p).hasName() ? mp.header(p).name() : "#" + std::to_string(p); };
     std::string missing;
     for (const auto& n : names) {
         std::vector<int> hits;
         std::vector<std::string> within;
-        for (int p = 0; p < mp.parts(); ++p)
+        for (int p = 0; p < mp.parts(); ++p) {
             if (has(p, n)) hits.push_back(p), within.push_back(n);
-        for (int p = 0; hits.empty() && p < mp.parts(); ++p) {
             const std::string pn = mp.header(p).hasName() ? mp.header(p).name() : std::string();
             if (!pn.empty() && n.size() > pn.size() + 1 && n.compare(0, pn.size(), pn) == 0 && n[pn.size()] == '.' &&
                 has(p, n.substr(pn.size() + 1)))
@@ -451,25 +452,31 @@ inline std::string exr_locate_channels(const Imf::MultiPartInputFile& mp, const 
         }
         if (hits.size() > 1) {
             std::string in;
-            for (int p : hits) in += (in.empty() ? "'" : ", '") + part_name(p) + "'";
-            return "channel " + n + " is in parts " + in + ": name it as PART." + n;
+            for (std::size_t h = 0; h < hits.size(); ++h)
+                in += (h == 0 ? "part '" : ", part '") + part_name(hits[h]) + "': " + within[h];
+            return "channel " + n + " is ambiguous (" + in + "): name its part, as PART.CHANNEL";
         }
         if (hits.empty()) {
             missing += (missing.empty() ? "" : ", ") + n;
             continue;
         }
+        for (std::size_t k = 0; k < part.size(); ++k)
+            if (part[k] == hits[0] && channel[k] == within[0])
+                return "channels " + names[k] + " and " + n + " are one channel (part '" + part_name(hits[0]) + "': " +
+                       within[0] + ")";
         part.push_back(hits[0]);
         channel.push_back(within[0]);
     }
     if (missing.empty()) return {};
     std::string have;
     for (int p = 0; p < mp.parts(); ++p) {
+        if (!flat(p)) continue;  // (a deep part's samples are not read)
         std::string list;
         const Imf::ChannelList& cl = mp.header(p).channels();
         for (auto it = cl.begin(); it != cl.end(); ++it) list += (list.empty() ? "" : ", ") + std::string(it.name());
         have += (have.empty() ? "part '" : "; part '") + part_name(p) + "': " + list;
     }
-    return "missing channel(s) " + missing + " (the file has " + have + ")";
+    return "missing channel(s) " + missing + " (the file has " + (have.empty() ? "no part but deep ones" : have) + ")";
 }
 
 // A multi-part file: each channel from the part exr_locate_channels finds; the parts read
@@ -503,6 +510,7 @@ inline std::string exr_read_multipart(Imf::IStream& in, std::uint64_t stream_byt
 inline std::string read_exr(Imf::IStream& in, std::uint64_t stream_bytes, const std::string& name,
                             const std::vector<std::string>& names, image& out) {
     try {
+        if (names.empty()) return name + ": no channel asked for";
         bool multipart = false;
         const std::string bad = exr_header_check(in, stream_bytes, names.size(), multipart);
         if (!bad.empty()) return name + (bad[0] == 'i' ? " " : ": ") + bad;

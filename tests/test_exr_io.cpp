@@ -406,12 +406,35 @@ TEST_CASE("read_exr: a multi-part file's channels come from the part that holds 
     firefly_tools::set_exr_threads(0);
     image back;
     std::string e = tools_read(bytes, {"R", "G", "B"}, back);
-    CHECK(e.find("channel R is in parts 'beauty', 'variance': name it as PART.R") != std::string::npos);
+    CHECK(e.find("channel R is ambiguous (part 'beauty': R, part 'variance': R): name its part, as PART.CHANNEL") !=
+          std::string::npos);
+    // Two names that read one channel are refused (one of them was left at 0).
+    e = tools_read(bytes, {"beauty.G", "Variance", "mean.Variance"}, back);
+    CHECK(e.find("channels Variance and mean.Variance are one channel (part 'mean': Variance)") != std::string::npos);
+    CHECK(tools_read(bytes, {}, back).find("no channel asked for") != std::string::npos);
     e = tools_read(bytes, {"beauty.R", "Z"}, back);
     CHECK(e.find("missing channel(s) Z") != std::string::npos);
     CHECK(e.find("part 'beauty': A, B, G, R; part 'variance': B, G, R; part 'mean': Variance") != std::string::npos);
     e = tools_read(bytes, {"beauty.R", "nothing.R"}, back);
     CHECK(e.find("missing channel(s) nothing.R") != std::string::npos);
+}
+
+TEST_CASE("read_exr: a name read two ways in a multi-part file is refused, never guessed", "[exr_io]") {
+    // Part 'a' holds b.R and part 'a.b' holds R: a.b.R reads either. Part 'beauty' holds R and
+    // part 'other' holds a channel named beauty.R: beauty.R reads either. Both were read from
+    // the first part that matched.
+    const image ab = test_image(4, 4, 0, 0, {"b.R"}, 1), abr = test_image(4, 4, 0, 0, {"R"}, 2);
+    const std::string dotted = imf_write_parts({{"a", ab, Imf::FLOAT, Imf::ZIP_COMPRESSION, false},
+                                                {"a.b", abr, Imf::FLOAT, Imf::ZIP_COMPRESSION, false}});
+    image back;
+    CHECK(tools_read(dotted, {"a.b.R"}, back).find("channel a.b.R is ambiguous (part 'a': b.R, part 'a.b': R)") !=
+          std::string::npos);
+    const image beauty = test_image(4, 4, 0, 0, {"R"}, 3), other = test_image(4, 4, 0, 0, {"beauty.R"}, 4);
+    const std::string shadow = imf_write_parts({{"beauty", beauty, Imf::FLOAT, Imf::ZIP_COMPRESSION, false},
+                                                {"other", other, Imf::FLOAT, Imf::ZIP_COMPRESSION, false}});
+    CHECK(tools_read(shadow, {"beauty.R"}, back).find("ambiguous") != std::string::npos);
+    REQUIRE(tools_read(shadow, {"other.beauty.R"}, back).empty());  // the part named: one reading
+    CHECK(same_bits(back.pixels, other.pixels));
 }
 
 TEST_CASE("read_exr: channels from parts with different windows are refused", "[exr_io]") {

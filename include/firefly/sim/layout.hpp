@@ -43,7 +43,6 @@ struct pixel_model {
     std::uint32_t touched = 0;
 };
 
-// Mean of the firefly ratio: U[0.5, 1.5) x E, or log-uniform on [E, E_max).
 // A pixel coordinate or length from a double option: clamped to [lo, hi] first (NaN: lo), so
 // that no option value casts out of int's range.
 inline int clamped_int(double v, int lo, int hi) noexcept {
@@ -51,6 +50,7 @@ inline int clamped_int(double v, int lo, int hi) noexcept {
     return v <= hi ? static_cast<int>(v) : hi;
 }
 
+// Mean of the firefly ratio: U[0.5, 1.5) x E, or log-uniform on [E, E_max).
 inline double mean_ratio(const scene& sc) noexcept {
     const double lo = sc.firefly_energy, hi = sc.firefly_energy_max;
     return hi > lo && lo > 0 ? (hi - lo) / std::log(hi / lo) : lo;
