@@ -73,8 +73,21 @@ TEST_CASE("fdr: log tails of Student's t and the normal at known points", "[fdr]
     }
     CHECK(student_t_log_upper_tail(0.0, 5.0) == Approx(std::log(0.5)));
     CHECK(std::isnan(student_t_log_upper_tail(-1.0, 5.0)));
-    // 1e9 degrees of freedom: the normal; at 1e30 standard deviations, finite and tiny.
-    CHECK(student_t_log_upper_tail(10.0, 1e9) == Approx(-53.2312851505124705783).epsilon(1e-9));
+    // Huge degrees of freedom (references: mpmath's regularized incomplete beta at 100 and 400
+    // digits, from the small end, 1 - I_x(1/2, df/2) with x = t^2 / (df + t^2)): the
+    // plain normal tail was 2.5e-4 off at t = 10, df = 1.001e7, and 4.8e-8 relatively at 1e9.
+    // At 1e30 standard deviations, finite and tiny.
+    struct point {
+        double df, t, log_p;
+    };
+    for (const point& p : {point{1.001e7, 5.612, -18.420647226081062567}, point{1.001e7, 10.0, -53.231030430068721156},
+                           point{1.001e7, 37.5, -707.61953464265571925}, point{1e8, 5.612, -18.420670916945744128},
+                           point{1e8, 10.0, -53.23125965284397148}, point{1e8, 37.5, -707.66403848748432015},
+                           point{1e9, 10.0, -53.23128260074409817}, point{1e10, 5.612, -18.420673525842120295},
+                           point{1e10, 10.0, -53.231284895535618112}, point{1e10, 37.5, -707.66893980874762695}}) {
+        INFO("df " << p.df << ", t " << p.t);
+        CHECK(student_t_log_upper_tail(p.t, p.df) == Approx(p.log_p).epsilon(2e-9));
+    }
     CHECK(std::isfinite(student_t_log_upper_tail(1e30, 3.0)));
     CHECK(student_t_log_upper_tail(1e30, 3.0) < -200.0);
     // Normal: exact below 30, Mills' ratio beyond (mpmath, 30 digits).

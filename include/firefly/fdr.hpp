@@ -63,11 +63,16 @@ inline double normal_log_upper_tail(double z) noexcept {
     return -0.5 * z2 - std::log(z) - 0.5 * std::log(2.0 * 3.141592653589793) + std::log(series);
 }
 
-// log P(T > t) for Student's t with df degrees of freedom (t >= 0, df >= 1); above 1e7 degrees
-// of freedom the normal tail (the difference is below 1e-6 relative there).
+// log P(T > t) for Student's t with df degrees of freedom (t >= 0, df >= 1). Above 1e7 degrees
+// of freedom, where the incomplete beta function's own error grows (~1e-6 in log p at 1e10),
+// and where t^4 <= 0.04 df: the normal tail corrected to first order in 1 / df,
+//     log P(T > t) = log P(Z > t) + t^2 (t^2 + 2) / (4 df) + O(t^6 / df^2)
+// (the plain normal tail was 2.5e-4 off in log p at t = 10, df = 1e7; the corrected one within
+// 3e-8 of a 100-digit reference, test "fdr: log tails"); beyond that t the incomplete beta.
 inline double student_t_log_upper_tail(double t, double df) noexcept {
     if (!(t > 0)) return t == 0 ? std::log(0.5) : std::numeric_limits<double>::quiet_NaN();
-    if (df > 1e7) return normal_log_upper_tail(t);
+    const double t2 = t * t;
+    if (df > 1e7 && t2 * t2 <= 0.04 * df) return normal_log_upper_tail(t) + t2 * (t2 + 2.0) / (4.0 * df);
     return detail::student_t_tail<double>(t, df).log_p;
 }
 
