@@ -95,15 +95,20 @@ inline bool exr_size_plausible(std::uint64_t pixels, std::uint64_t channels, std
     return pixels * channels * 4 <= (std::uint64_t{1} << 20) + file_bytes * 4096;
 }
 
+// A header's channel names, comma-separated, in the file's order.
+inline std::string exr_channel_list(const Imf::Header& header) {
+    std::string list;
+    for (auto it = header.channels().begin(); it != header.channels().end(); ++it)
+        list += (list.empty() ? "" : ", ") + std::string(it.name());
+    return list;
+}
+
 inline std::string exr_channels_missing(const Imf::Header& header, const std::vector<std::string>& names) {
     std::string missing;
     for (const auto& n : names)
         if (!header.channels().findChannel(n.c_str())) missing += (missing.empty() ? "" : ", ") + n;
     if (missing.empty()) return {};
-    std::string have;
-    for (auto it = header.channels().begin(); it != header.channels().end(); ++it)
-        have += (have.empty() ? "" : ", ") + std::string(it.name());
-    return "missing channel(s) " + missing + " (the file has: " + have + ")";
+    return "missing channel(s) " + missing + " (the file has: " + exr_channel_list(header) + ")";
 }
 
 // True when a chlist value (entries of name, NUL, 16 bytes; then a NUL) fills exactly `v`:
@@ -438,14 +443,15 @@ inline std::string exr_locate_channels(const Imf::MultiPartInputFile& mp, const 
         return !(h.hasType() && Imf::isDeepData(h.type()));
     };
     auto has = [&](int p, const std::string& n) { return flat(p) && mp.header(p).channels().findChannel(n.c_str()) != nullptr; };
-    auto part_name = [&](int p) { return mp.header(p).hasName() ? mp.header(p).name() : "#" + std::to_string(p); };
+    auto name_of = [&](int p) { return mp.header(p).hasName() ? mp.header(p).name() : std::string(); };
+    auto part_name = [&](int p) { return mp.header(p).hasName() ? name_of(p) : "#" + std::to_string(p); };  // for messages
     std::string missing;
     for (const auto& n : names) {
         std::vector<int> hits;
         std::vector<std::string> within;
         for (int p = 0; p < mp.parts(); ++p) {
             if (has(p, n)) hits.push_back(p), within.push_back(n);
-            const std::string pn = mp.header(p).hasName() ? mp.header(p).name() : std::string();
+            const std::string pn = name_of(p);
             if (!pn.empty() && n.size() > pn.size() + 1 && n.compare(0, pn.size(), pn) == 0 && n[pn.size()] == '.' &&
                 has(p, n.substr(pn.size() + 1)))
                 hits.push_back(p), within.push_back(n.substr(pn.size() + 1));
@@ -471,10 +477,7 @@ inline std::string exr_locate_channels(const Imf::MultiPartInputFile& mp, const 
     std::string have;
     for (int p = 0; p < mp.parts(); ++p) {
         if (!flat(p)) continue;  // (a deep part's samples are not read)
-        std::string list;
-        const Imf::ChannelList& cl = mp.header(p).channels();
-        for (auto it = cl.begin(); it != cl.end(); ++it) list += (list.empty() ? "" : ", ") + std::string(it.name());
-        have += (have.empty() ? "part '" : "; part '") + part_name(p) + "': " + list;
+        have += (have.empty() ? "part '" : "; part '") + part_name(p) + "': " + exr_channel_list(mp.header(p));
     }
     return "missing channel(s) " + missing + " (the file has " + (have.empty() ? "no part but deep ones" : have) + ")";
 }

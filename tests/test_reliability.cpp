@@ -1,4 +1,4 @@
-// Defects of earlier versions, each pinned by a test that failed before its fix.
+// Inputs and edge cases that broke earlier versions, each pinned by a test.
 #include <firefly/firefly.hpp>
 #include <firefly/buffers.hpp>
 

@@ -181,6 +181,11 @@ inline bool cleaned_fit(std::size_t pixels, const std::vector<float>* const* cle
         if (!cleaned[b] || cleaned[b]->size() != pixels * 3) return false;
     return true;
 }
+inline bool cleaned_fit(const buffers& original, const std::vector<std::vector<float>>& cleaned) {
+    std::vector<const std::vector<float>*> p;
+    for (const auto& c : cleaned) p.push_back(&c);
+    return cleaned_fit(original.pixels(), p.data(), p.size(), static_cast<std::size_t>(original.count()));
+}
 
 // Metrics of a call whose cleaned images do not fit: every one NaN (never a read past them).
 inline accuracy unfit() {
@@ -216,9 +221,7 @@ inline accuracy evaluate(const frame& original, const std::vector<float>* const 
 // The combined image of K buffers: their mean weighted by samples (the estimate of all samples);
 // NaN unless `color` holds every buffer at the frame's size.
 inline std::vector<float> combine(const buffers& original, const std::vector<std::vector<float>>& color) {
-    std::vector<const std::vector<float>*> p;
-    for (const auto& c : color) p.push_back(&c);
-    if (!detail::cleaned_fit(original.pixels(), p.data(), p.size(), static_cast<std::size_t>(original.count())))
+    if (!detail::cleaned_fit(original, color))
         return std::vector<float>(original.pixels() * 3, std::numeric_limits<float>::quiet_NaN());
     std::vector<float> out(original.pixels() * 3, 0.0f);
     double total = 0;
@@ -233,10 +236,7 @@ inline std::vector<float> combine(const buffers& original, const std::vector<std
 // K buffers: `cleaned[b]` is buffer b's cleaned RGB colour (as many as original.count(), each
 // the frame's size; else every metric is NaN).
 inline accuracy evaluate_buffers(const buffers& original, const std::vector<std::vector<float>>& cleaned) {
-    std::vector<const std::vector<float>*> p;
-    for (const auto& c : cleaned) p.push_back(&c);
-    if (!detail::cleaned_fit(original.pixels(), p.data(), p.size(), static_cast<std::size_t>(original.count())))
-        return detail::unfit();
+    if (!detail::cleaned_fit(original, cleaned)) return detail::unfit();
     const int k = original.count();
     accuracy a = detail::evaluate_counts(
         original, k, [&](int b) { return &original.color[b]; }, [&](int b) { return &cleaned[b]; });
