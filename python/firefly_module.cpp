@@ -46,9 +46,14 @@ std::string enum_choices() {
     return s;
 }
 
+// A Python bool or a numpy one (a flag read from an array is numpy.bool_).
+bool is_boolean(py::handle v) {
+    return PyBool_Check(v.ptr()) || py::isinstance(v, py::module_::import("numpy").attr("bool_"));
+}
+
 template <class T>
 T option_from_python(const std::string& name, py::handle v) {
-    const bool is_bool = PyBool_Check(v.ptr());
+    const bool is_bool = is_boolean(v);
     if constexpr (std::is_enum_v<T>) {
         if (!py::isinstance<py::str>(v)) throw py::type_error(name + " must be a string: one of " + enum_choices<T>());
         const std::string s = v.cast<std::string>();
@@ -57,7 +62,7 @@ T option_from_python(const std::string& name, py::handle v) {
         throw py::value_error(name + " must be one of " + enum_choices<T>() + ", not '" + s + "'");
     } else if constexpr (std::is_same_v<T, bool>) {
         if (!is_bool) throw py::type_error(name + " must be True or False");
-        return v.cast<bool>();
+        return PyObject_IsTrue(v.ptr()) == 1;
     } else if constexpr (std::is_integral_v<T>) {
         if (is_bool || !PyIndex_Check(v.ptr())) throw py::type_error(name + " must be an integer");
         int overflow = 0;
@@ -68,7 +73,13 @@ T option_from_python(const std::string& name, py::handle v) {
     } else {
         if (is_bool || !PyNumber_Check(v.ptr()) || py::isinstance<py::str>(v))
             throw py::type_error(name + " must be a number");
-        return static_cast<T>(py::float_(py::reinterpret_borrow<py::object>(v)).cast<double>());
+        const double x = PyFloat_AsDouble(v.ptr());  // an int past DBL_MAX raises OverflowError
+        if (x == -1.0 && PyErr_Occurred()) {
+            if (!PyErr_ExceptionMatches(PyExc_OverflowError)) throw py::error_already_set();
+            PyErr_Clear();
+            throw py::value_error(name + " is out of range");
+        }
+        return static_cast<T>(x);
     }
 }
 

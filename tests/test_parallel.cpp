@@ -7,8 +7,12 @@
 #include <cfloat>
 #include <limits>
 #include <cstring>
+#include <chrono>
 #include <mutex>
+#include <new>
 #include <set>
+#include <stdexcept>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -125,6 +129,36 @@ TEST_CASE("the pool is destroyed cleanly, idle or never used", "[parallel]") {
         CHECK(each_once(used, 9));
         std::this_thread::sleep_for(std::chrono::microseconds(100));  // workers back asleep
     }
+}
+
+TEST_CASE("an exception thrown on a worker reaches the caller of run()", "[parallel][errors]") {
+    // A worker's std::bad_alloc (a detector task allocates) called std::terminate: the Python
+    // module aborted the interpreter where it raises MemoryError on the calling thread.
+    const executor e = executor::threads(4);
+    const std::thread::id caller = std::this_thread::get_id();
+    std::atomic<bool> worker_ran{false};
+    auto throw_on_worker = [&](std::size_t) {
+        if (std::this_thread::get_id() != caller) {
+            worker_ran = true;
+            throw std::runtime_error("worker");
+        }
+        // the caller waits (a bounded time) for a worker to take a task
+        for (int k = 0; k < 5000 && !worker_ran; ++k) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    };
+    bool caught = false;
+    try {
+        e.run(64, throw_on_worker);
+    } catch (const std::runtime_error& x) {
+        caught = std::string(x.what()) == "worker";
+    }
+    CHECK(worker_ran.load());
+    CHECK(caught);
+    CHECK(each_once(e, 100));  // the pool runs on, the exception gone with its job
+    CHECK_THROWS_AS(e.run(8, [](std::size_t i) {  // on whichever thread takes task 0
+                        if (i == 0) throw std::bad_alloc();
+                    }),
+                    std::bad_alloc);
+    CHECK(each_once(e, 100));
 }
 
 TEST_CASE("the detector gives the same bytes for serial, threads(2) and threads(4)", "[parallel][pipeline]") {

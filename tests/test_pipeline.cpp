@@ -736,6 +736,19 @@ TEST_CASE("combine_halves: DBL_MAX variances give a finite variance of the mean"
     CHECK(ov[0] == DBL_MAX / 2);
 }
 
+TEST_CASE("combine_halves: the mean of two least denormals is that denormal", "[pipeline][numerics]") {
+    // 0.5 a + 0.5 b rounded each half of 4.9e-324 to 0 (ties to even): the mean of two equal
+    // halves must be their value. One rounding of (a + b) / 2 keeps it, and rounds the mean of
+    // the least denormal and 0 to even as IEEE division would.
+    const double d = std::numeric_limits<double>::denorm_min();
+    std::vector<double> a = {d, d, 3 * d, -d}, b = {d, 0, d, -d}, va = {d, d, 2 * d, 0}, vb = {d, 3 * d, 2 * d, 0},
+                        out(4), ov(4);
+    auto V = [](std::vector<double>& x) { return *make_image_view(x.data(), 4, 1, 1); };
+    REQUIRE(combine_halves(V(a), V(b), V(out), V(va), V(vb), V(ov)).ok());
+    CHECK(out == std::vector<double>{d, (d + 0) / 2, 2 * d, -d});
+    CHECK(ov == std::vector<double>{(2 * d) / 4, d, d, 0});
+}
+
 TEST_CASE("random frames: no NaN out, unmarked pixels untouched, layouts agree", "[pipeline][fuzz]") {
     std::uint64_t state = 0x9E3779B97F4A7C15ull;
     auto next = [&] {

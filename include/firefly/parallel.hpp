@@ -17,6 +17,7 @@
 #include <thread>
 #include <vector>
 #if defined(__cpp_exceptions)
+#include <exception>
 #include <system_error>
 #endif
 
@@ -33,9 +34,10 @@ namespace detail {
 //
 // Without exceptions, a failure to start a std::thread (std::system_error) cannot be caught
 // and terminates the program, as any std::thread use does; with exceptions the pool keeps the
-// workers it could start (none: the calling thread does all the work). A task that throws on
-// the calling thread leaves run() after the workers are done with the job; one that throws on
-// a worker terminates, as with any std::thread. The detector's tasks do not throw.
+// workers it could start (none: the calling thread does all the work). A task that throws
+// (the detector's only throw is std::bad_alloc) ends the job: no task starts after it, and
+// run() rethrows the first such exception on the calling thread once the workers are done
+// with the job, whichever thread it was thrown on.
 class thread_pool {
 public:
     using task = std::function<void(std::size_t)>;
@@ -69,8 +71,17 @@ public:
             ++generation_;
         }
         wake_.notify_all();
-        const finish_on_exit finish{*this};  // also if t throws on this thread
+#if defined(__cpp_exceptions)
+        std::exception_ptr failed;
+        {
+            const finish_on_exit finish{*this, &failed};  // also if t throws on this thread
+            guarded_work(t, count);
+        }
+        if (failed) std::rethrow_exception(failed);
+#else
+        const finish_on_exit finish{*this};
         work(t, count);
+#endif
     }
 
     // Worker threads started so far (0 before the first run with more than one task).
@@ -81,11 +92,18 @@ private:
     // the pool for the next run.
     struct finish_on_exit {
         thread_pool& p;
+#if defined(__cpp_exceptions)
+        std::exception_ptr* failed;  // takes the job's first exception, before the pool is freed
+#endif
         ~finish_on_exit() {
             {
                 std::unique_lock<std::mutex> l(p.m_);
                 p.job_ = nullptr;
                 p.done_.wait(l, [this] { return p.busy_ == 0; });
+#if defined(__cpp_exceptions)
+                *failed = std::move(p.failed_);
+                p.failed_ = nullptr;
+#endif
             }
             p.in_use_.store(false, std::memory_order_release);
         }
@@ -94,6 +112,19 @@ private:
     void work(const task& t, std::size_t count) {
         for (std::size_t i; (i = next_.fetch_add(1, std::memory_order_relaxed)) < count;) t(i);
     }
+
+#if defined(__cpp_exceptions)
+    // work(), keeping the job's first exception for run() and handing out no task after it.
+    void guarded_work(const task& t, std::size_t count) {
+        try {
+            work(t, count);
+        } catch (...) {
+            next_.store(count, std::memory_order_relaxed);
+            std::lock_guard<std::mutex> l(m_);
+            if (!failed_) failed_ = std::current_exception();
+        }
+    }
+#endif
 
     // Called with in_use_ held, so by one thread at a time.
     void start() {
@@ -123,7 +154,11 @@ private:
             const std::size_t count = count_;
             ++busy_;
             l.unlock();
+#if defined(__cpp_exceptions)
+            guarded_work(*t, count);
+#else
             work(*t, count);
+#endif
             l.lock();
             if (--busy_ == 0) done_.notify_all();
         }
@@ -141,6 +176,9 @@ private:
     std::size_t count_ = 0;
     std::uint64_t generation_ = 0;
     unsigned busy_ = 0;                // workers inside the current job
+#if defined(__cpp_exceptions)
+    std::exception_ptr failed_;        // the current job's first exception
+#endif
     bool stop_ = false;
 };
 

@@ -1564,14 +1564,23 @@ bool same_elements(const image_view<T>& a, const image_view<U>& b) noexcept {
            a.pixel_stride() == b.pixel_stride() && a.row_stride() == b.row_stride() &&
            a.channel_stride() == b.channel_stride();
 }
+
+// w (p + q) for w a power of two below 1: one rounding where the sum is finite, so two halves
+// of the least denormal average to it (w p + w q rounded each product to 0); w p + w q where
+// the sum overflows, so DBL_MAX halves stay finite.
+inline double scaled_sum(double p, double q, double w) noexcept {
+    const double s = p + q;
+    return std::isfinite(s) || !std::isfinite(p) || !std::isfinite(q) ? w * s : w * p + w * q;
+}
 }  // namespace detail
 
-// The final image of a frame, (A + B) / 2, and the variance of that mean, vA / 4 + vB / 4 (a
-// quarter each first: FLT_MAX or DBL_MAX variances stay finite). out_variance may be empty.
-// Views must share size and channel counts. A written view may be the very input it replaces
-// (out on a or b, out_variance on var_a or var_b: each element is read before it is written)
-// and must otherwise share no memory with another view; a shifted overlap would overwrite
-// elements still to be read, and is refused (aliased_views) before anything is written.
+// The final image of a frame, (A + B) / 2, and the variance of that mean, (vA + vB) / 4 (a
+// quarter each first where the sum overflows: FLT_MAX or DBL_MAX variances stay finite).
+// out_variance may be empty. Views must share size and channel counts. A written view may be
+// the very input it replaces (out on a or b, out_variance on var_a or var_b: each element is
+// read before it is written) and must otherwise share no memory with another view; a shifted
+// overlap would overwrite elements still to be read, and is refused (aliased_views) before
+// anything is written.
 template <class T, class U>
 status combine_halves(const image_view<T>& a, const image_view<T>& b, const image_view<U>& out,
                       const image_view<T>& var_a = {}, const image_view<T>& var_b = {},
@@ -1594,10 +1603,10 @@ status combine_halves(const image_view<T>& a, const image_view<T>& b, const imag
     if (!ok) return status{errc::aliased_views, "combine: an output shares memory with another view"};
     for (int y = 0; y < a.height(); ++y)
         for (int x = 0; x < a.width(); ++x) {
-            for (int c = 0; c < a.channels(); ++c) out.store(x, y, c, 0.5 * a.load(x, y, c) + 0.5 * b.load(x, y, c));
+            for (int c = 0; c < a.channels(); ++c) out.store(x, y, c, detail::scaled_sum(a.load(x, y, c), b.load(x, y, c), 0.5));
             if (var)
                 for (int c = 0; c < out_variance.channels(); ++c)
-                    out_variance.store(x, y, c, 0.25 * var_a.load(x, y, c) + 0.25 * var_b.load(x, y, c));
+                    out_variance.store(x, y, c, detail::scaled_sum(var_a.load(x, y, c), var_b.load(x, y, c), 0.25));
         }
     return ok_status();
 }

@@ -149,6 +149,7 @@ def test_mask_size_is_a_value_error():
     ({"reduction": "median"}, "reduction must be one of"),
     ({"kernel_width": 2 ** 40}, "kernel_width is out of range"),
     ({"max_iterations": 2 ** 80}, "max_iterations is out of range"),
+    ({"alpha": 10 ** 400}, "alpha is out of range"),
     ({"threads": 0}, "threads must be >= 1"),
 ])
 def test_bad_option_value_is_a_value_error(options, match):
@@ -161,6 +162,8 @@ def test_bad_option_value_is_a_value_error(options, match):
     ({"alpha": True}, "alpha must be a number"),
     ({"kernel_width": 5.0}, "kernel_width must be an integer"),
     ({"reconstruct": 1}, "reconstruct must be True or False"),
+    ({"kernel_width": np.bool_(True)}, "kernel_width must be an integer"),
+    ({"alpha": np.bool_(True)}, "alpha must be a number"),
     ({"highlight_rule": 2}, "highlight_rule must be a string"),
     ({"kernelwidth": 5}, "unexpected keyword argument 'kernelwidth'"),
     ({"": 5}, "unexpected keyword argument ''"),
@@ -173,6 +176,8 @@ def test_bad_option_type_or_name_is_a_type_error(options, match):
 def test_numpy_scalars_are_accepted_as_options():
     det = firefly.Detector(alpha=np.float32(0.25), kernel_width=np.int64(3))
     assert det.options["alpha"] == 0.25 and det.options["kernel_width"] == 3
+    for flag in (np.bool_(False), np.bool_(True)):
+        assert firefly.Detector(reconstruct=flag).options["reconstruct"] == bool(flag)
 
 
 def test_a_refused_frame_leaves_the_detector_usable():
