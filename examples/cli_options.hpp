@@ -6,6 +6,7 @@
 #include <firefly/firefly.hpp>
 
 #include <cerrno>
+#include <cfloat>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -116,7 +117,10 @@ inline CLI::Validator number_in(double lo, double hi, bool open_lo, bool open_hi
             char* end = nullptr;
             errno = 0;
             const double v = std::strtod(s.c_str(), &end);
-            const bool ok = !s.empty() && *end == '\0' && errno == 0 && std::isfinite(v) &&
+            // ERANGE with a result no larger than DBL_MIN is an underflow (a denormal or 0): the
+            // number as near as a double holds it. An overflow (HUGE_VAL) stays refused.
+            const bool in_range = errno == 0 || (errno == ERANGE && std::fabs(v) <= DBL_MIN);
+            const bool ok = !s.empty() && *end == '\0' && in_range && std::isfinite(v) &&
                             (open_lo ? v > lo : v >= lo) && (open_hi ? v < hi : v <= hi);
             return ok ? std::string() : "wants " + what + ", not '" + s + "'";
         },
@@ -147,9 +151,11 @@ const char* const description =
 const char* const footer =
     "Outputs: every file of a frame is first written to an exclusive temporary in its folder and\n"
     "renamed only when all of them are complete; a failure leaves none of them. An output that is\n"
-    "an input, two inputs that are one file (under any names), an output that is a directory,\n"
-    "device or pipe, and a sequence's --halves, --masks or --preview without '#' are refused. A\n"
-    "sequence goes on past a bad frame, reports it (stderr and --report) and exits 1 at the end.\n";
+    "an input, two outputs that are one file (in any frames), two inputs that are one file (under\n"
+    "any names), an output that is a directory, device or pipe, an input that is not a regular\n"
+    "file, an empty option value, and a sequence's --halves, --masks or --preview without '#' are\n"
+    "refused. A replaced output keeps its permission bits. A sequence goes on past a bad frame,\n"
+    "reports it (stderr and --report) and exits 1 at the end.\n";
 
 // An option taking one of a few words (name -> value).
 template <class E>
@@ -365,6 +371,21 @@ inline std::string choose_inputs(options& c, const raw_args& r) {
     return {};
 }
 
+// Two halves, PFM or OpenEXR each: a PFM half takes its variance from its --variance-a/-b
+// file, an OpenEXR half from its own channels (a variance file beside it would be ignored).
+inline std::string check_half_variances(const options& c) {
+    for (int i = 0; i < 2; ++i) {
+        const std::string flag = i ? "--variance-b" : "--variance-a";
+        const std::string& half = c.inputs[static_cast<std::size_t>(i)];
+        const bool pfm = ends_with_ci(half, ".pfm"), given = !(i ? c.var_b : c.var_a).empty();
+        if (pfm && !given)
+            return "PFM inputs hold colour only: give " + flag + " (the variance PFM of " + half + ")";
+        if (!pfm && given)
+            return flag + " goes with a PFM half only: " + half + " is OpenEXR and holds its own variance channels";
+    }
+    return {};
+}
+
 // Options that belong to one mode only.
 inline std::string check_mode_options(const options& c) {
     const bool halves = c.mode == input_mode::halves, renders = c.mode == input_mode::renders;
@@ -373,8 +394,8 @@ inline std::string check_mode_options(const options& c) {
     for (const auto& p : c.inputs) pfm = pfm || ends_with_ci(p, ".pfm");
     if (pfm_variance && !(halves && pfm))
         return "--variance-a and --variance-b go with PFM half buffers (HALF_A HALF_B) only";
-    if (halves && pfm && (c.var_a.empty() || c.var_b.empty()))
-        return "PFM inputs hold colour only: give --variance-a and --variance-b PFM files";
+    if (halves && pfm)
+        if (std::string e = check_half_variances(c); !e.empty()) return e;
     if (c.mode == input_mode::buffers && pfm)
         return "--buffers reads OpenEXR files with colour and variance channels (a PFM holds colour only: "
                "--renders takes colour-only files)";
@@ -435,6 +456,21 @@ inline std::string check_option_groups(const CLI::App& app, const options& c) {
     return {};
 }
 
+// An option given an empty value: refused, never taken for "not given" (--frames '' would
+// run one frame, --report '' write no report).
+inline std::string check_empty_values(const CLI::App& app) {
+    for (const CLI::Option* o : app.get_options())
+        for (const std::string& v : o->results()) {
+            if (!v.empty()) continue;
+            if (o->get_positional() && o->get_lnames().empty()) return "an input file name is empty";
+            std::string wanted = o->get_type_name();  // FILE, NAMES, ...; FILE... for a list
+            if (wanted.size() > 3 && wanted.compare(wanted.size() - 3, 3, "...") == 0)
+                wanted.resize(wanted.size() - 3);
+            return o->get_name() + " wants " + wanted + ", not an empty value";
+        }
+    return {};
+}
+
 // Parses the command line. Returns the complaint (one line) or empty; `done` is set when
 // --help or --version was answered.
 inline std::string parse(int argc, char** argv, options& c, bool& done) {
@@ -459,6 +495,7 @@ inline std::string parse(int argc, char** argv, options& c, bool& done) {
     } catch (const CLI::ParseError& e) {
         return e.what();
     }
+    if (std::string e = check_empty_values(app); !e.empty()) return e;
     if (version) {
         std::printf("firefly %d.%d.%d\n", FIREFLY_VERSION_MAJOR, FIREFLY_VERSION_MINOR, FIREFLY_VERSION_PATCH);
         done = true;

@@ -13,9 +13,10 @@
 //
 // Outputs: all files of a frame (-o, --halves, --masks, --preview; and --report for a single
 // frame) are written to exclusive temporaries and renamed only when all are complete, so a
-// failure leaves none of them. An output that is an input, by file identity, and two inputs
-// that are one file are refused before anything is written. A sequence goes on past a bad
-// frame, records it in the report and exits 1 at the end.
+// failure leaves none of them; a frame's progress line follows its commit. An output that is
+// an input, by file identity, two outputs of any frames that are one file and two inputs that
+// are one file are refused before anything is written. A sequence goes on past a bad frame,
+// records it in the report and exits 1 at the end.
 #include <firefly/firefly.hpp>
 
 #ifdef __GLIBC__
@@ -34,6 +35,7 @@
 #include <new>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "cli_options.hpp"
@@ -147,26 +149,36 @@ std::string output_target_problem(const std::string& path) {
     return {};
 }
 
-// An output of the frame that is an input of any frame, or another output of the frame.
-std::string output_collision(const options& c, const frame_files& f, const id_map& inputs) {
-    std::vector<const std::string*> paths = {&f.out, &f.preview[0], &f.preview[1], &c.report};
-    for (const auto& p : f.halves) paths.push_back(&p);
-    for (const auto& p : f.masks) paths.push_back(&p);
-    id_map outs;
-    for (const std::string* p : paths) {
-        if (p->empty()) continue;
-        if (std::string e = output_target_problem(*p); !e.empty()) return e;
-        file_id id;
-        if (!firefly_tools::identify(*p, id)) continue;  // no such folder: the write will say so
-        if (const auto in = inputs.find(id); in != inputs.end()) return "output " + *p + " is the input " + in->second + ": refused";
-        if (const auto o = outs.find(id); o != outs.end()) return "outputs " + o->second + " and " + *p + " are the same file";
-        outs.emplace(id, *p);
-    }
+// An output that is an input of any frame, or an output already seen (`outs`: every output of
+// the frames checked so far, so that outputs of different frames are compared too). `label`
+// names the output in the message: its option, and its frame in a sequence.
+std::string output_collision(const std::string& path, const std::string& label, const id_map& inputs,
+                             id_map& outs) {
+    if (path.empty()) return {};
+    if (std::string e = output_target_problem(path); !e.empty()) return e;
+    file_id id;
+    if (!firefly_tools::identify(path, id)) return {};  // no such folder: the write will say so
+    if (const auto in = inputs.find(id); in != inputs.end())
+        return "output " + path + " is the input " + in->second + ": refused";
+    const std::string named = path + " (" + label + ")";
+    if (const auto o = outs.find(id); o != outs.end())
+        return "outputs " + o->second + " and " + named + " are the same file";
+    outs.emplace(id, named);
     return {};
 }
 
+// The outputs of one frame with their options (the report, one for the whole run, is not
+// among them).
+std::vector<std::pair<std::string, std::string>> frame_outputs(const frame_files& f) {
+    std::vector<std::pair<std::string, std::string>> outs = {
+        {"-o", f.out}, {"--preview", f.preview[0]}, {"--preview", f.preview[1]}};
+    for (const std::string& p : f.halves) outs.emplace_back("--halves", p);
+    for (const std::string& p : f.masks) outs.emplace_back("--masks", p);
+    return outs;
+}
+
 // Refuses, before anything is written, two inputs of a frame that are one file, an output
-// that is an input of any frame and an output named twice in a frame.
+// that is an input of any frame and two outputs (of any frames) that are one file.
 std::string check_files(const options& c) {
     const long long first = c.sequence ? c.first : 0, last = c.sequence ? c.last : 0;
     id_map inputs;
@@ -179,9 +191,13 @@ std::string check_files(const options& c) {
                 if (existing_id(p, id)) inputs.emplace(id, p);
             }
     }
+    id_map outs;
     for (long long fr = first; fr <= last; fr += c.step)
-        if (std::string e = output_collision(c, files_of(c, fr), inputs); !e.empty()) return e;
-    return {};
+        for (const auto& [flag, path] : frame_outputs(files_of(c, fr))) {
+            const std::string label = c.sequence ? flag + ", frame " + std::to_string(fr) : flag;
+            if (std::string e = output_collision(path, label, inputs, outs); !e.empty()) return e;
+        }
+    return output_collision(c.report, "--report", inputs, outs);
 }
 
 // One buffer of a frame as read: colour (3) [+ alpha] [+ variance (1 or 3)], interleaved.
@@ -206,6 +222,8 @@ std::string read_pfm_buffer(const std::string& path, const std::string& var_path
     h.img.width = col.width;
     h.img.height = col.height;
     h.img.channels = {"R", "G", "B"};
+    // A PFM has no windows: it lies at the origin, as an EXR whose windows are its size there.
+    h.img.data_window = h.img.display_window = {0, 0, col.width - 1, col.height - 1};
     for (int k = 0; k < h.nv; ++k) h.img.channels.push_back(h.nv == 1 ? "Variance.Y" : std::string("Variance.") + "RGB"[k]);
     const std::size_t np = static_cast<std::size_t>(col.width) * static_cast<std::size_t>(col.height);
     const std::size_t stride = static_cast<std::size_t>(3 + h.nv), nv = static_cast<std::size_t>(h.nv);
@@ -622,12 +640,17 @@ void write_frame(const options& c, frame_job& j) {
         j.fr.error = write_outputs(c, j.in.files, j.in.h, j.masks, j.before, j.fr.outputs);
         j.fr.record["milliseconds"] = json{
             {"read", j.in.read_ms}, {"process", j.process_ms}, {"write", ms_since(t2)}};
-        const image& first = j.in.h[0].img;
-        if (j.fr.error.empty() && !c.quiet)
-            std::printf("%s: %dx%d, %s, %.1f ms\n", j.in.files.out.c_str(), first.width, first.height, j.line.c_str(),
-                        j.process_ms);
     }
     if (!j.fr.error.empty()) j.fr.outputs.discard();
+}
+
+// A frame's progress line: printed once its outputs are committed, never for a frame that
+// leaves none.
+void print_progress(const options& c, const frame_job& j) {
+    if (c.quiet || !j.fr.error.empty()) return;
+    const image& first = j.in.h[0].img;
+    std::printf("%s: %dx%d, %s, %.1f ms\n", j.in.files.out.c_str(), first.width, first.height, j.line.c_str(),
+                j.process_ms);
 }
 
 // The options of the detector that ran: firefly::detector's for two buffers, the K-buffer
@@ -723,6 +746,7 @@ int run(const options& c) {
     auto settle = [&](frame_job& j) {
         frame_result& fr = j.fr;
         if (fr.error.empty() && c.sequence) fr.error = fr.outputs.commit();
+        if (c.sequence) print_progress(c, j);
         if (!fr.error.empty()) {
             ++failed;
             fr.record["error"] = fr.error;
@@ -764,6 +788,7 @@ int run(const options& c) {
         std::fprintf(stderr, "firefly: %s\n", e.c_str());
         return 1;
     }
+    if (!c.sequence) print_progress(c, *previous);
     return failed ? 1 : 0;
 }
 

@@ -726,6 +726,7 @@ inline std::string write_exr(Imf::OStream& os, const image& img) {
 inline std::string read_exr(const std::string& path, const std::vector<std::string>& names, image& out) {
 #ifdef FIREFLY_HAVE_OPENEXR
     try {
+        if (std::string e = check_regular_input(path); !e.empty()) return e;
         std::ifstream f(path, std::ios::binary);
         struct stat st {};
         if (!f || stat(path.c_str(), &st) != 0) return "cannot open " + path;

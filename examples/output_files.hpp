@@ -64,6 +64,15 @@ inline mode_t new_file_mode() {
     return mode;
 }
 
+// The permission bits of the output that will be at `path`: those of the regular file it
+// replaces (a private output stays private), or a new file's. Set-id and sticky bits are not
+// carried over to new content.
+inline mode_t output_mode(const std::string& path) {
+    struct stat st {};
+    if (::stat(path.c_str(), &st) == 0 && S_ISREG(st.st_mode)) return st.st_mode & 0777;
+    return new_file_mode();
+}
+
 // Outputs written together: open() creates an exclusive temporary next to each final name
 // (mkstemp: O_CREAT | O_EXCL, so a planted name or symlink is never opened), commit() renames
 // them in reverse order of opening (the first output opened, the main one, appears last).
@@ -84,7 +93,8 @@ public:
     }
     ~output_set() { discard(); }
 
-    // Opens a temporary for `path`; `fd` receives its descriptor (owned by the set).
+    // Opens a temporary for `path`, with the mode the output is to have; `fd` receives its
+    // descriptor (owned by the set).
     std::string open(const std::string& path, int& fd) {
         std::string leaf = leaf_name(path);
         if (leaf.size() > 200) leaf.resize(200);  // the temporary's name must fit NAME_MAX
@@ -92,7 +102,7 @@ public:
         fd = ::mkstemp(&tmpl[0]);
         if (fd < 0) return "cannot create a temporary for " + path + ": " + std::strerror(errno);
         files_.push_back({path, tmpl, fd});
-        if (::fchmod(fd, new_file_mode()) != 0) return "cannot set the mode of " + tmpl;
+        if (::fchmod(fd, output_mode(path)) != 0) return "cannot set the mode of " + tmpl;
         return {};
     }
     // Closes every descriptor (reporting a failed close, e.g. a full disk).

@@ -117,8 +117,18 @@ inline std::string parse_pfm(const unsigned char* data, std::size_t size, const 
     return {};
 }
 
+// An input must be a regular file, which stat tells before the file is opened: opening a pipe
+// waits for a writer that may never come.
+inline std::string check_regular_input(const std::string& path) {
+    struct stat st {};
+    if (::stat(path.c_str(), &st) != 0) return "cannot open " + path;
+    if (!S_ISREG(st.st_mode)) return path + " is not a regular file";
+    return {};
+}
+
 // Reads a PFM file: a regular file whose size is checked before it is read.
 inline std::string read_pfm(const std::string& path, pfm_image& out) {
+    if (std::string e = check_regular_input(path); !e.empty()) return e;
     std::FILE* f = std::fopen(path.c_str(), "rb");
     if (!f) return "cannot open " + path;
     struct stat st {};

@@ -728,3 +728,147 @@ if(NOT status STREQUAL "failed" OR NOT EXISTS ${WORK}/sr.0001.exr OR NOT EXISTS 
   message(SEND_ERROR "renders_sequence_bad_frame: status ${status}, frames 1 and 2 not both written")
 endif()
 no_temporaries(renders_end)
+
+# --- an input that is not a regular file is refused before it is opened ---------------------
+# (opening a pipe waits for a writer that never comes); no output and no temporary are left,
+# the report's included.
+function(expect_pipe_refused name)
+  file(REMOVE ${O})
+  execute_process(COMMAND ${FIREFLY} ${ARGN} -o ${O} --report ${WORK}/pipe_report.json TIMEOUT 30
+                  RESULT_VARIABLE rc ERROR_VARIABLE err)
+  string(FIND "${err}" "in_pipe" named)
+  string(FIND "${err}" "is not a regular file" pos)
+  if(NOT rc EQUAL 1 OR named EQUAL -1 OR pos EQUAL -1 OR EXISTS ${O})
+    message(SEND_ERROR "${name}: a pipe as input: exit ${rc}\n${err}")
+  else()
+    message(STATUS "${name}: refused as expected: ${err}")
+  endif()
+  no_temporaries(${name})
+endfunction()
+execute_process(COMMAND mkfifo ${WORK}/in_pipe.exr ${WORK}/in_pipe.pfm RESULT_VARIABLE fifo_rc)
+if(fifo_rc EQUAL 0)
+  expect_pipe_refused(pipe_exr_half ${WORK}/in_pipe.exr ${B})
+  expect_pipe_refused(pipe_pfm_half ${WORK}/in_pipe.pfm ${DATA}/b_color.pfm --variance-a ${DATA}/a_variance.pfm
+                      --variance-b ${DATA}/b_variance.pfm)
+  expect_pipe_refused(pipe_pfm_variance ${DATA}/a_color.pfm ${DATA}/b_color.pfm --variance-a ${DATA}/a_variance.pfm
+                      --variance-b ${WORK}/in_pipe.pfm)
+  expect_pipe_refused(pipe_render --renders ${WORK}/r4_0.pfm ${WORK}/r4_1.pfm ${WORK}/in_pipe.pfm)
+  expect_pipe_refused(pipe_buffer --buffers ${A} ${B} ${WORK}/in_pipe.exr)
+endif()
+
+# --- outputs of different frames that are one file are refused ------------------------------
+# frame 10's half xf_h10_a.exr is frame 0's mask xf_h1 + 0 + _a.exr
+foreach(f 00 10)
+  configure_file(${A} ${WORK}/xf_a${f}.exr COPYONLY)
+  configure_file(${B} ${WORK}/xf_b${f}.exr COPYONLY)
+endforeach()
+set(both "xf_h10_a.exr (--masks, frame 0) and ${WORK}/xf_h10_a.exr (--halves, frame 10) are the same file")
+expect_fail(outputs_collide_across_frames "${both}" ${WORK}/xf_o0.exr "${WORK}/xf_a##.exr" "${WORK}/xf_b##.exr"
+            --frames 0-10:10 -o "${WORK}/xf_o#.exr" --halves "${WORK}/xf_h#" --masks "${WORK}/xf_h1#")
+if(EXISTS ${WORK}/xf_h10_a.exr OR EXISTS ${WORK}/xf_o10.exr)
+  message(SEND_ERROR "outputs_collide_across_frames: outputs were written")
+endif()
+expect_fail(report_is_sequence_output "same file" ${WORK}/xf_o0.exr "${WORK}/xf_a##.exr" "${WORK}/xf_b##.exr"
+            --frames 0-10:10 -o "${WORK}/xf_o#.exr" --report ${WORK}/xf_o10.exr)
+
+# --- PFM and OpenEXR inputs mixed: a PFM lies at the origin ---------------------------------
+set(MIXED ${WORK}/r4_0.pfm ${WORK}/r4h_1.exr ${WORK}/r4h_2.exr ${WORK}/r4h_3.exr)
+expect_ok(renders_mixed --renders ${MIXED} -o ${WORK}/mixed.exr -q)
+expect_ok(renders_mixed_exr_first --renders ${WORK}/r4h_1.exr ${WORK}/r4_0.pfm ${WORK}/r4h_2.exr ${WORK}/r4h_3.exr
+          -o ${WORK}/mixed2.exr -q)
+foreach(f mixed.exr mixed2.exr)
+  exr_info(${WORK}/${f} info)
+  if(NOT info STREQUAL "data 0 0 15 7 display 0 0 15 7 nonfinite 0")
+    message(SEND_ERROR "renders_mixed: ${f} has '${info}'")
+  endif()
+endforeach()
+expect_fail(renders_mixed_shifted "differ in data or display window" ${O} --renders ${WORK}/r4_0.pfm ${WORK}/r4h_1.exr
+            ${WORK}/r4h_2.exr ${WORK}/shifted_3.exr -o ${O})
+# two halves, one PFM (its variance from --variance-a) and one OpenEXR (its own variance)
+expect_ok(halves_mixed ${DATA}/a_color.pfm ${B} --variance-a ${DATA}/a_variance.pfm -o ${WORK}/hmixed.exr -q)
+exr_info(${WORK}/hmixed.exr info)
+if(NOT info STREQUAL "data 0 0 95 79 display 0 0 95 79 nonfinite 0")
+  message(SEND_ERROR "halves_mixed: hmixed.exr has '${info}'")
+endif()
+expect_fail(halves_mixed_exr_variance "--variance-b goes with a PFM half" ${O} ${DATA}/a_color.pfm ${B}
+            --variance-a ${DATA}/a_variance.pfm --variance-b ${DATA}/b_variance.pfm -o ${O})
+expect_fail(halves_mixed_no_variance "give --variance-a" ${O} ${DATA}/a_color.pfm ${B} -o ${O})
+
+# --- an option given an empty value is refused, never taken for "not given" ----------------
+# (execute_process is called directly: an empty argument does not survive a function's ARGN)
+function(expect_empty_refused name rc err)
+  string(FIND "${err}" "empty" pos)
+  if(NOT rc EQUAL 2 OR pos EQUAL -1 OR EXISTS ${O})
+    message(SEND_ERROR "${name}: an empty value: exit ${rc}\n${err}")
+  else()
+    message(STATUS "${name}: refused as expected: ${err}")
+  endif()
+  no_temporaries(${name})
+endfunction()
+foreach(opt --frames --channels --variance --alpha-channel --report --halves --masks --preview --variance-a
+            --variance-b)
+  file(REMOVE ${O})
+  execute_process(COMMAND ${FIREFLY} ${A} ${B} -o ${O} ${opt} "" RESULT_VARIABLE rc ERROR_VARIABLE err)
+  expect_empty_refused(empty${opt} "${rc}" "${err}")
+endforeach()
+file(REMOVE ${O})
+execute_process(COMMAND ${FIREFLY} ${A} ${B} -o "" RESULT_VARIABLE rc ERROR_VARIABLE err)
+expect_empty_refused(empty_output "${rc}" "${err}")
+execute_process(COMMAND ${FIREFLY} "" ${B} -o ${O} RESULT_VARIABLE rc ERROR_VARIABLE err)
+expect_empty_refused(empty_half "${rc}" "${err}")
+execute_process(COMMAND ${FIREFLY} --renders ${WORK}/r4_0.pfm "" ${WORK}/r4_2.pfm ${WORK}/r4_3.pfm -o ${O}
+                RESULT_VARIABLE rc ERROR_VARIABLE err)
+expect_empty_refused(empty_render "${rc}" "${err}")
+
+# --- a replaced output keeps its permission bits --------------------------------------------
+file(REMOVE ${WORK}/private.exr)
+file(TOUCH ${WORK}/private.exr)
+file(CHMOD ${WORK}/private.exr PERMISSIONS OWNER_READ OWNER_WRITE)
+expect_ok(private_output ${A} ${B} -o ${WORK}/private.exr -q)
+execute_process(COMMAND stat -c %a ${WORK}/private.exr OUTPUT_VARIABLE mode OUTPUT_STRIP_TRAILING_WHITESPACE)
+if(NOT mode STREQUAL "600")
+  message(SEND_ERROR "private_output: a 600 output became ${mode}")
+endif()
+
+# --- numbers that underflow (a denormal, or 0) are taken; those that overflow are refused ---
+expect_ok(tolerance_denormal ${A} ${B} -o ${WORK}/tiny.exr --tolerance 1e-320 -q)
+expect_ok(tolerance_underflow ${A} ${B} -o ${WORK}/tiny.exr --tolerance 1e-400 -q)
+expect_ok(relative_error_denormal ${A} ${B} -o ${WORK}/tiny.exr --max-relative-error 4.9e-324 -q)
+expect_fail(tolerance_overflow "--tolerance" ${O} ${A} ${B} -o ${O} --tolerance 1e400)
+
+# --- the progress line is printed only once a frame's outputs are committed -----------------
+# A folder whose path leaves room for a temporary's name (at most 212 bytes) but not for a
+# 255-byte final name within PATH_MAX (4096 with its NUL): the write succeeds, the rename fails.
+string(LENGTH "${WORK}" n)
+math(EXPR pad "3860 - ${n} - 1")
+set(deep ${WORK})
+while(pad GREATER 0)
+  if(pad GREATER 201)
+    set(part_len 150)
+  else()
+    set(part_len ${pad})
+  endif()
+  string(REPEAT "p" ${part_len} part)
+  set(deep "${deep}/${part}")
+  math(EXPR pad "${pad} - ${part_len} - 1")
+endwhile()
+file(MAKE_DIRECTORY ${deep})
+string(REPEAT "o" 251 leaf)
+string(REPEAT "s" 247 seq_leaf)
+foreach(case "single;${deep}/${leaf}.exr;${A};${B}"
+             "sequence;${deep}/${seq_leaf}####.exr;${WORK}/seq_a.####.exr;${WORK}/seq_b.####.exr;--frames;7-7")
+  list(POP_FRONT case what)
+  execute_process(COMMAND ${FIREFLY} -o ${case} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  string(FIND "${out}" ": 96x80," printed)
+  if(NOT rc EQUAL 1 OR NOT printed EQUAL -1)
+    message(SEND_ERROR "progress_after_commit_${what}: exit ${rc}, a progress line for a frame not written:\n${out}")
+  else()
+    message(STATUS "progress_after_commit_${what}: ok")
+  endif()
+  no_temporaries(progress_after_commit_${what})
+endforeach()
+execute_process(COMMAND ${FIREFLY} ${A} ${B} -o ${WORK}/progress.exr RESULT_VARIABLE rc OUTPUT_VARIABLE out)
+string(FIND "${out}" "progress.exr: 96x80," printed)
+if(NOT rc EQUAL 0 OR printed EQUAL -1)
+  message(SEND_ERROR "progress_printed: exit ${rc}, no progress line for a frame written:\n${out}")
+endif()

@@ -9,10 +9,14 @@
 #include <OpenEXR/ImfStdIO.h>
 #include <OpenEXR/ImfTiledOutputPart.h>
 
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <new>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <random>
@@ -446,4 +450,21 @@ TEST_CASE("read_exr: channels from parts with different windows are refused", "[
     CHECK(tools_read(bytes, {"R", "G", "B", "Variance"}, back).find("different data windows") != std::string::npos);
     REQUIRE(tools_read(bytes, {"Variance"}, back).empty());  // one part alone: its own window
     CHECK(back.data_window.min_x == 1);
+}
+
+TEST_CASE("read_exr, read_pfm: a pipe is refused before it is opened, never waited on", "[exr_io]") {
+    // opening a pipe for reading waits for a writer: a reader that opened it would hang here
+    // (and the test time out)
+    const char* tmp = std::getenv("TMPDIR");
+    std::string dir = std::string(tmp ? tmp : "/tmp") + "/firefly-pipe-XXXXXX";
+    REQUIRE(::mkdtemp(&dir[0]) != nullptr);
+    const std::string pipe = dir + "/pipe";
+    REQUIRE(::mkfifo(pipe.c_str(), 0600) == 0);
+    image img;
+    CHECK(firefly_tools::read_exr(pipe, {"R"}, img) == pipe + " is not a regular file");
+    firefly_tools::pfm_image pfm;
+    CHECK(firefly_tools::read_pfm(pipe, pfm) == pipe + " is not a regular file");
+    CHECK(firefly_tools::read_pfm(dir + "/none", pfm) == "cannot open " + dir + "/none");
+    ::unlink(pipe.c_str());
+    ::rmdir(dir.c_str());
 }

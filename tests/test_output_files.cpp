@@ -99,3 +99,22 @@ TEST_CASE("a commit that succeeds replaces every file and leaves no backup", "[t
     CHECK(read_file(dir + "/new.txt") == "made");
     CHECK(names_in(dir) == std::vector<std::string>{"kept.txt", "new.txt"});  // no temporary, no backup
 }
+
+TEST_CASE("a replaced file keeps its permission bits; a new one gets those open() would give it", "[tools][outputs]") {
+    const folder_with_kept_file folder;
+    const std::string& dir = folder.dir;
+    const std::string kept = dir + "/kept.txt";
+    for (const mode_t mode : {mode_t{0600}, mode_t{0750}}) {  // 0750: no umask gives it to a new file
+        REQUIRE(::chmod(kept.c_str(), mode) == 0);
+        firefly_tools::output_set set;
+        write_text(set, kept, "new");
+        write_text(set, dir + "/new.txt", "made");
+        REQUIRE(set.commit().empty());
+        struct stat st {};
+        REQUIRE(::stat(kept.c_str(), &st) == 0);
+        CHECK((st.st_mode & 07777) == mode);
+        REQUIRE(::stat((dir + "/new.txt").c_str(), &st) == 0);
+        CHECK((st.st_mode & 07777) == firefly_tools::new_file_mode());
+        REQUIRE(::unlink((dir + "/new.txt").c_str()) == 0);
+    }
+}
