@@ -14,6 +14,9 @@ if(MODE STREQUAL "find_package")
   run(${CMAKE_COMMAND} -S "${FIREFLY_SOURCE}" -B "${WORK}/firefly-build" -G "${GENERATOR}"
       -DCMAKE_INSTALL_PREFIX=${WORK}/configured-prefix -DFIREFLY_BUILD_TESTS=OFF
       -DFIREFLY_BUILD_BENCHMARKS=OFF -DFIREFLY_BUILD_EXAMPLES=OFF -DFIREFLY_INSTALL=ON)
+  # The headers install from a tree configured but not built (the README's command), then
+  # again once it is built (with the Python module where pybind11 is found).
+  run(${CMAKE_COMMAND} --install "${WORK}/firefly-build" --prefix "${WORK}/prefix")
   run(${CMAKE_COMMAND} --build "${WORK}/firefly-build")
   run(${CMAKE_COMMAND} --install "${WORK}/firefly-build" --prefix "${WORK}/prefix")
   foreach(f include/firefly/firefly.hpp share/cmake/firefly/fireflyConfig.cmake

@@ -282,11 +282,11 @@ struct threshold_table {
 // the last ceil(usable / 2)), which the step-down never flags, so its fireflies do not move
 // it. NaN without a usable buffer.
 inline double lower_level(const pixel_buffers& p) noexcept {
-    const int u = p.usable, half = (u + 1) / 2;
+    const int u = p.usable, upper = (u + 1) / 2;
     if (u == 0) return std::numeric_limits<double>::quiet_NaN();
     double sum = 0;
-    for (int j = u - half; j < u; ++j) sum += p.ranked_y(j);
-    return sum / half;
+    for (int j = u - upper; j < u; ++j) sum += p.ranked_y(j);
+    return sum / upper;
 }
 
 // The mean y of the usable buffers from the i-th highest down (R of step i + 1; i = 0: all).

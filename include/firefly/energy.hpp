@@ -191,15 +191,15 @@ inline void set_record_weights(tap_weights& t) {
     }
 }
 
-inline tap_weights make_taps(double sigma, int r, bool half) {
+inline tap_weights make_taps(double sigma, int r, bool offset_half) {
     tap_weights t;
-    t.half = half;
+    t.half = offset_half;
     t.w.resize(static_cast<std::size_t>(r) + 1);
     double sum = 0;
     for (int d = 0; d <= r; ++d) {
-        const double o = d + (half ? 0.5 : 0.0);
+        const double o = d + (offset_half ? 0.5 : 0.0);
         t.w[static_cast<std::size_t>(d)] = std::exp(-0.5 * o * o / (sigma * sigma));
-        sum += (d == 0 && !half) ? t.w[0] : 2.0 * t.w[static_cast<std::size_t>(d)];
+        sum += (d == 0 && !offset_half) ? t.w[0] : 2.0 * t.w[static_cast<std::size_t>(d)];
     }
     t.sq.resize(t.w.size());
     for (std::size_t d = 0; d < t.w.size(); ++d) {
@@ -214,8 +214,8 @@ inline tap_weights make_taps(double sigma, int r, bool half) {
 struct tap_pair {
     int lo, hi;
 };
-inline tap_pair taps_at(int p2, int d, bool half, int n) noexcept {
-    const int o2 = 2 * d + (half ? 1 : 0);
+inline tap_pair taps_at(int p2, int d, bool offset_half, int n) noexcept {
+    const int o2 = 2 * d + (offset_half ? 1 : 0);
     const int lo = (p2 - o2) / 2, hi = (p2 + o2) / 2;  // p2 -+ o2 is even
     return {p2 - o2 >= 0 && lo < n ? lo : -1, hi >= 0 && hi < n ? hi : -1};
 }
@@ -547,8 +547,8 @@ inline void tap_sums(int p2, const tap_weights& tw, const double* weights, int n
     double sum[K] = {};
     auto rec = [&](int i) { return line + static_cast<std::size_t>(i) * stride; };
     auto wk = [&](std::size_t d) { return weights + d * K; };
-    const int r = static_cast<int>(tw.w.size()) - 1, half = tw.half ? 1 : 0;
-    const int lo = (p2 - half) / 2, hi = (p2 + half) / 2;  // tap 0's pixels (p2 - half is even)
+    const int r = static_cast<int>(tw.w.size()) - 1, shift = tw.half ? 1 : 0;
+    const int lo = (p2 - shift) / 2, hi = (p2 + shift) / 2;  // tap 0's pixels (p2 - shift is even)
     if (lo - r >= 0 && hi + r < n) {  // every tap inside the line (most nodes): no tests
         const double *a = rec(lo), *b = rec(hi);
         std::size_t d = 0;
@@ -582,8 +582,8 @@ inline void record_sums(int p2, const tap_weights& tw, int n, const double* line
 inline void excess_sums(int p2, const tap_weights& tw, const excess_pixel* first, const excess_pixel* last,
                         double* out) noexcept {
     double sum[4] = {};
-    const int r = static_cast<int>(tw.w.size()) - 1, half = tw.half ? 1 : 0;
-    const int lo = (p2 - half) / 2, hi = (p2 + half) / 2;
+    const int r = static_cast<int>(tw.w.size()) - 1, shift = tw.half ? 1 : 0;
+    const int lo = (p2 - shift) / 2, hi = (p2 + shift) / 2;
     const excess_pixel* right = std::lower_bound(first, last, hi, [](const excess_pixel& e, int x) { return e.x < x; });
     const excess_pixel* left = right;  // the left side: left[-1], left[-2], ... (x <= lo)
     if (!tw.half && right != last && right->x == lo) add_tap<4>(sum, &tw.excess[0], right->v), ++right;
@@ -746,10 +746,10 @@ inline void energy_y_then_x(const std::vector<P>& profile, const excess_map& whe
 
 // ---- The coarse scale (see the top of this file) -----------------------------------------------
 
-// Unit taps over 2 half + 1 pixels: record_sums with them is a box sum (1 x v is v exactly).
-inline tap_weights box_taps(int half) {
+// Unit taps over 2 radius + 1 pixels: record_sums with them is a box sum (1 x v is v exactly).
+inline tap_weights box_taps(int radius) {
     tap_weights t;
-    t.w.assign(static_cast<std::size_t>(half) + 1, 1.0);
+    t.w.assign(static_cast<std::size_t>(radius) + 1, 1.0);
     t.sq = t.w;
     set_record_weights(t);
     return t;

@@ -476,8 +476,8 @@ inline pooled_estimate pooled_relative_variance(const std::vector<float> (&rel_v
     const float* rv[2] = {rel_var[0].data(), rel_var[1].data()};
     std::size_t count = 0;
     for_each_neighbour(w, h, x, y, radius, [&](std::size_t j) {
-        for (int half = 0; half < 2; ++half)
-            if (informative(rv[half][j])) p[count++] = std::log(rv[half][j]);
+        for (int which = 0; which < 2; ++which)
+            if (informative(rv[which][j])) p[count++] = std::log(rv[which][j]);
     });
     pooled_estimate e;
     if (count < static_cast<std::size_t>(std::max(min_count, 1))) return e;

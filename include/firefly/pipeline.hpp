@@ -474,9 +474,9 @@ private:
             s.band_counts.assign(bands, stddev_counts{});
         }
         exec_.run(2 * bands, [&](std::size_t t) {  // both halves' bands in one run
-            const std::size_t half = t / bands, band = t % bands;
-            const half_buffer<C, V, A>& b = *hb[half];
-            half_state& s = halves_[half];
+            const std::size_t which = t / bands, band = t % bands;
+            const half_buffer<C, V, A>& b = *hb[which];
+            half_state& s = halves_[which];
             s.band_counts[band] = detail::stddev_band(b.color, b.variance, b.alpha, options_.reduction, s.sd.data(),
                                                       s.label.data(), band);
         });

@@ -127,20 +127,20 @@ t_tail<Real> student_t_tail(Real t, Real df) noexcept {
         }
     }
     const Real lb = log_beta_half(a);
-    const Real half = Real(0.5);
+    const Real one_half = Real(0.5);
     t_tail<Real> out;
-    out.log_pdf = -(a + half) * L1 - half * std::log(df) - lb;
-    const Real log_front = -a * L1 + half * log_y - lb;  // log(x^a y^(1/2) / B)
+    out.log_pdf = -(a + one_half) * L1 - one_half * std::log(df) - lb;
+    const Real log_front = -a * L1 + one_half * log_y - lb;  // log(x^a y^(1/2) / B)
     if (x < (a + 1) / (a + Real(2.5))) {
         // P = 1/2 I_x(a, 1/2): the small side when t is large.
-        const Real h = incbeta_cf(a, half, x);
+        const Real h = incbeta_cf(a, one_half, x);
         out.log_p = log_front + std::log(h / a) - std::log(Real(2));
-        out.centre = half - std::exp(out.log_p);
+        out.centre = one_half - std::exp(out.log_p);
     } else {
         // 1/2 - P = 1/2 I_y(1/2, a): the small side when t is near 0.
-        const Real j = y > 0 ? std::exp(log_front) * incbeta_cf(half, a, y) / half : Real(0);
-        out.centre = half * j;
-        out.log_p = std::log(half) + std::log1p(-j);
+        const Real j = y > 0 ? std::exp(log_front) * incbeta_cf(one_half, a, y) / one_half : Real(0);
+        out.centre = one_half * j;
+        out.log_p = std::log(one_half) + std::log1p(-j);
     }
     return out;
 }

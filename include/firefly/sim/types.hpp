@@ -84,10 +84,10 @@ struct frame {
     std::uint32_t effects = 0;
     std::size_t pixels() const noexcept { return static_cast<std::size_t>(width) * static_cast<std::size_t>(height); }
     // Ground truth that reads 0 where an array was not allocated.
-    float firefly(int half, std::size_t i) const noexcept {
-        return firefly_energy[half].empty() ? 0.0f : firefly_energy[half][i];
+    float firefly(int which, std::size_t i) const noexcept {
+        return firefly_energy[which].empty() ? 0.0f : firefly_energy[which][i];
     }
-    bool bad(int half, std::size_t i) const noexcept { return !nonfinite[half].empty() && nonfinite[half][i]; }
+    bool bad(int which, std::size_t i) const noexcept { return !nonfinite[which].empty() && nonfinite[which][i]; }
     // Mean expected radiance over the channels without the fireflies' share.
     double expected_without_fireflies(std::size_t i) const noexcept {
         const double e = (expected[i * 3] + expected[i * 3 + 1] + expected[i * 3 + 2]) / 3.0;
