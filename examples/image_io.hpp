@@ -3,7 +3,6 @@
 // are caught here, at the edge of the tools, and never reach the library.
 #pragma once
 
-#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -726,13 +725,12 @@ inline std::string write_exr(Imf::OStream& os, const image& img) {
 inline std::string read_exr(const std::string& path, const std::vector<std::string>& names, image& out) {
 #ifdef FIREFLY_HAVE_OPENEXR
     try {
-        if (std::string e = check_regular_input(path); !e.empty()) return e;
+        std::uint64_t size = 0;
+        if (std::string e = check_regular_input(path, &size); !e.empty()) return e;
         std::ifstream f(path, std::ios::binary);
-        struct stat st {};
-        if (!f || stat(path.c_str(), &st) != 0) return "cannot open " + path;
-        if (!S_ISREG(st.st_mode)) return path + " is not a regular file";
+        if (!f) return "cannot open " + path;
         Imf::StdIFStream in(f, path.c_str());
-        return read_exr(in, static_cast<std::uint64_t>(st.st_size), path, names, out);
+        return read_exr(in, size, path, names, out);
     } catch (const std::exception& e) {
         return path + ": " + e.what();
     }

@@ -118,11 +118,12 @@ inline std::string parse_pfm(const unsigned char* data, std::size_t size, const 
 }
 
 // An input must be a regular file, which stat tells before the file is opened: opening a pipe
-// waits for a writer that may never come.
-inline std::string check_regular_input(const std::string& path) {
+// waits for a writer that may never come. `size`, if given, receives the file's size.
+inline std::string check_regular_input(const std::string& path, std::uint64_t* size = nullptr) {
     struct stat st {};
     if (::stat(path.c_str(), &st) != 0) return "cannot open " + path;
     if (!S_ISREG(st.st_mode)) return path + " is not a regular file";
+    if (size) *size = static_cast<std::uint64_t>(st.st_size);
     return {};
 }
 
