@@ -212,7 +212,8 @@ inline void add_io_options(CLI::App& app, options& c, raw_args& r) {
                    "FIRST-LAST[:STEP] frame sequence: '#' runs in every path become the frame number, zero-padded "
                    "to the run's length")->type_name("FIRST-LAST[:STEP]")
         ->group("inputs");
-    app.add_option("-o,--output", c.out, "the mean of the cleaned buffers (EXR: colour, Variance.* of the mean, alpha)")->type_name("FILE")->group("outputs");
+    app.add_option("-o,--output", c.out, "the mean of the cleaned buffers: OpenEXR (colour, Variance.* of the mean, alpha), or for a "
+                   "NAME.pfm colour there and the variance in NAME_variance.pfm (no alpha: --no-alpha)")->type_name("FILE")->group("outputs");
     app.add_option("--halves", c.halves,
                    "also write the cleaned buffers: PREFIX_a.exr and PREFIX_b.exr (two halves), PREFIX_0.exr ... "
                    "(--buffers, --renders)")->type_name("PREFIX")->group("outputs");

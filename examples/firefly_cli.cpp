@@ -9,7 +9,8 @@
 // of each buffer's mean, Variance.R/G/B, the names pbrt-v4 and Blender write), or N colour-only
 // renders with different seeds; optional alpha A. Two buffers are cleaned by firefly::detector,
 // more by firefly::cross_buffer_detector (the same object: the first is inside the second). It
-// writes the mean of the cleaned buffers with the variance of that mean.
+// writes the mean of the cleaned buffers with the variance of that mean (OpenEXR, or two PFM
+// files, colour and variance, for an output named .pfm).
 //
 // Outputs: all files of a frame (-o, --halves, --masks, --preview; and --report for a single
 // frame) are written to exclusive temporaries and renamed only when all are complete, so a
@@ -86,14 +87,21 @@ const char* inputs_noun(const options& c) {
 // Every file name of one frame.
 struct frame_files {
     std::vector<std::string> in, var;        // one per buffer (var: PFM variance of a half, or empty)
-    std::string out, preview[2];             // outputs; empty when not asked for
+    std::string out, out_variance, preview[2];  // outputs; empty when not asked for (out_variance: a PFM -o's)
     std::vector<std::string> halves, masks;  // one per buffer when asked for
 };
+
+// A PFM holds colour alone: the variance of a PFM output goes beside it, NAME_variance.pfm.
+std::string pfm_variance_name(const std::string& out) {
+    const std::size_t ext = out.size() - 4;  // ".pfm", any case
+    return out.substr(0, ext) + "_variance" + out.substr(ext);
+}
 
 frame_files files_of(const options& c, long long frame) {
     auto p = [&](const std::string& s) { return c.sequence ? frame_path(s, frame) : s; };
     frame_files f;
     f.out = p(c.out);
+    if (firefly_cli::ends_with_ci(f.out, ".pfm")) f.out_variance = pfm_variance_name(f.out);
     for (int i = 0; i < c.buffers(); ++i) {
         f.in.push_back(p(c.inputs[static_cast<std::size_t>(i)]));
         f.var.push_back(c.mode == input_mode::halves ? p(i ? c.var_b : c.var_a) : std::string());
@@ -171,7 +179,7 @@ std::string output_collision(const std::string& path, const std::string& label, 
 // among them).
 std::vector<std::pair<std::string, std::string>> frame_outputs(const frame_files& f) {
     std::vector<std::pair<std::string, std::string>> outs = {
-        {"-o", f.out}, {"--preview", f.preview[0]}, {"--preview", f.preview[1]}};
+        {"-o", f.out}, {"-o (its variance)", f.out_variance}, {"--preview", f.preview[0]}, {"--preview", f.preview[1]}};
     for (const std::string& p : f.halves) outs.emplace_back("--halves", p);
     for (const std::string& p : f.masks) outs.emplace_back("--masks", p);
     return outs;
@@ -403,8 +411,9 @@ std::string write_exr_to(firefly_tools::output_set& set, const std::string& path
     return firefly_tools::write_exr(os, img);
 }
 
-std::string write_png_to(firefly_tools::output_set& set, const std::string& path, const float* rgb, int w, int h,
-                         std::size_t stride, float exposure) {
+// Writes one output of the set through a stdio stream: write(FILE*) returns an error or "".
+template <class Write>
+std::string write_stream_to(firefly_tools::output_set& set, const std::string& path, Write write) {
     int fd = -1;
     std::string e = set.open(path, fd);
     if (!e.empty()) return e;
@@ -414,9 +423,39 @@ std::string write_png_to(firefly_tools::output_set& set, const std::string& path
         if (dup >= 0) ::close(dup);
         return "cannot write " + path;
     }
-    e = firefly_tools::write_png_preview(f, path, rgb, w, h, stride, exposure);
+    e = write(f);
     if (std::fclose(f) != 0 && e.empty()) e = "write failed: " + path;
     return e;
+}
+
+std::string write_png_to(firefly_tools::output_set& set, const std::string& path, const float* rgb, int w, int h,
+                         std::size_t stride, float exposure) {
+    return write_stream_to(set, path, [&](std::FILE* f) {
+        return firefly_tools::write_png_preview(f, path, rgb, w, h, stride, exposure);
+    });
+}
+
+// Channels [first, first + n) of img as a PFM (n: 1 or 3).
+std::string write_pfm_to(firefly_tools::output_set& set, const std::string& path, const image& img, std::size_t first,
+                         std::size_t n) {
+    firefly_tools::pfm_image p;
+    p.width = img.width;
+    p.height = img.height;
+    p.channels = static_cast<int>(n);
+    const std::size_t stride = img.channels.size(), np = img.pixels.size() / stride;
+    p.pixels.resize(np * n);
+    for (std::size_t i = 0; i < np; ++i)
+        for (std::size_t k = 0; k < n; ++k) p.pixels[i * n + k] = img.pixels[i * stride + first + k];
+    return write_stream_to(set, path, [&](std::FILE* f) { return firefly_tools::write_pfm(f, path, p); });
+}
+
+// The main output: OpenEXR, or for a name ending .pfm colour there and the variance of the
+// mean beside it (a PFM has no alpha, so a frame with alpha is refused rather than cut).
+std::string write_main_to(firefly_tools::output_set& set, const frame_files& f, const image& comb, bool alpha) {
+    if (f.out_variance.empty()) return write_exr_to(set, f.out, comb);
+    if (alpha) return "-o " + f.out + ": a PFM holds no alpha; name the output .exr, or give --no-alpha";
+    std::string e = write_pfm_to(set, f.out, comb, 0, 3);
+    return e.empty() ? write_pfm_to(set, f.out_variance, comb, 3, comb.channels.size() - 3) : e;
 }
 
 json half_json(const half_report& h) {
@@ -532,7 +571,7 @@ std::string clean_cross(const options& c, cross_buffer_detector& xd, std::vector
 std::string write_outputs(const options& c, const frame_files& f, const std::vector<buffer_data>& h,
                           const mask_list& masks, const image& before, firefly_tools::output_set& set) {
     const image comb = combine(c, h);
-    std::string e = write_exr_to(set, f.out, comb);
+    std::string e = write_main_to(set, f, comb, h[0].has_alpha);
     for (std::size_t i = 0; i < f.halves.size() && e.empty(); ++i) e = write_exr_to(set, f.halves[i], h[i].img);
     for (std::size_t i = 0; i < f.masks.size() && e.empty(); ++i)
         e = write_exr_to(set, f.masks[i], mask_image(masks[i], comb, h.size() == 2));
@@ -628,6 +667,7 @@ void run_frame(const options& c, cross_buffer_detector& xd, frame_job& j) {
         rec["inputs"] = f.in;
     }
     rec["output"] = f.out;
+    if (!f.out_variance.empty()) rec["output_variance"] = f.out_variance;
     j.fr.error = j.in.error;
     rec["milliseconds"]["read"] = j.in.read_ms;
     if (j.fr.error.empty()) j.fr.error = clean_frame(c, xd, j);

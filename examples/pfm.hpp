@@ -150,17 +150,24 @@ inline std::string read_pfm(const std::string& path, pfm_image& out) {
     return parse_pfm(bytes.data(), bytes.size(), path, out);
 }
 
-inline std::string write_pfm(const std::string& path, const pfm_image& img) {
-    std::FILE* f = std::fopen(path.c_str(), "wb");
-    if (!f) return "cannot write " + path;
-    std::fprintf(f, "%s\n%d %d\n%s\n", img.channels == 3 ? "PF" : "Pf", img.width, img.height,
-                 detail::host_little_endian() ? "-1.0" : "1.0");
+// Writes img to an open stream (`name` for messages); the caller closes it.
+inline std::string write_pfm(std::FILE* f, const std::string& name, const pfm_image& img) {
+    if (std::fprintf(f, "%s\n%d %d\n%s\n", img.channels == 3 ? "PF" : "Pf", img.width, img.height,
+                     detail::host_little_endian() ? "-1.0" : "1.0") < 0)
+        return "write failed: " + name;
     const std::size_t row = static_cast<std::size_t>(img.width) * static_cast<std::size_t>(img.channels);
     bool ok = true;
     for (int y = img.height - 1; y >= 0 && ok; --y)
         ok = std::fwrite(&img.pixels[static_cast<std::size_t>(y) * row], sizeof(float), row, f) == row;
-    ok = (std::fclose(f) == 0) && ok;
-    return ok ? std::string() : "write failed: " + path;
+    return ok ? std::string() : "write failed: " + name;
+}
+
+inline std::string write_pfm(const std::string& path, const pfm_image& img) {
+    std::FILE* f = std::fopen(path.c_str(), "wb");
+    if (!f) return "cannot write " + path;
+    std::string e = write_pfm(f, path, img);
+    if (std::fclose(f) != 0 && e.empty()) e = "write failed: " + path;
+    return e;
 }
 
 }  // namespace firefly_tools

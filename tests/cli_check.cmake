@@ -114,6 +114,20 @@ endif()
 expect_ok(help --help)
 expect_ok(pfm ${DATA}/a_color.pfm ${DATA}/b_color.pfm --variance-a ${DATA}/a_variance.pfm
           --variance-b ${DATA}/b_variance.pfm -o ${WORK}/from_pfm.exr -q)
+# an output named .pfm is PFM (colour, and the variance beside it), the OpenEXR output's bits,
+# where before it was an OpenEXR file under a .pfm name
+expect_ok(pfm_out ${DATA}/a_color.pfm ${DATA}/b_color.pfm --variance-a ${DATA}/a_variance.pfm
+          --variance-b ${DATA}/b_variance.pfm -o ${WORK}/to_pfm.PFM -q --report ${WORK}/pfm_out.json)
+execute_process(COMMAND ${MAKE_NAN} same_pfm ${WORK}/from_pfm.exr ${WORK}/to_pfm.PFM ${WORK}/to_pfm_variance.PFM
+                RESULT_VARIABLE rc ERROR_VARIABLE err)
+if(NOT rc EQUAL 0)
+  message(SEND_ERROR "pfm_out: the PFM output differs from the OpenEXR one: ${err}")
+endif()
+file(READ "${WORK}/pfm_out.json" json)
+string(JSON pfm_var GET "${json}" frames 0 output_variance)
+if(NOT pfm_var STREQUAL "${WORK}/to_pfm_variance.PFM")
+  message(SEND_ERROR "pfm_out: the report names the variance output ${pfm_var}")
+endif()
 # a frame sequence: frames 7 and 8
 foreach(f 0007 0008)
   configure_file(${A} ${WORK}/seq_a.${f}.exr COPYONLY)
@@ -191,6 +205,17 @@ expect_fail(same_halves_link "same file" ${O} ${IA} ${WORK}/hard.exr -o ${O})
 make(alpha ${A} ${WORK}/alpha_a.exr)
 expect_fail(alpha_one_half "alpha channel A is in" ${O} ${WORK}/alpha_a.exr ${IB} -o ${O})
 expect_ok(no_alpha ${WORK}/alpha_a.exr ${IB} -o ${O} --no-alpha -q)
+make(alpha ${B} ${WORK}/alpha_b.exr)
+expect_fail(alpha_to_pfm "holds no alpha" ${WORK}/alpha.pfm ${WORK}/alpha_a.exr ${WORK}/alpha_b.exr -o ${WORK}/alpha.pfm)
+expect_ok(alpha_to_pfm_no_alpha ${WORK}/alpha_a.exr ${WORK}/alpha_b.exr -o ${WORK}/alpha.pfm --no-alpha -q)
+foreach(f alpha.pfm alpha_variance.pfm)
+  if(NOT EXISTS ${WORK}/${f})
+    message(SEND_ERROR "alpha_to_pfm_no_alpha: ${f} not written")
+  endif()
+endforeach()
+# a PFM output's variance file is an output too: never an input
+file(CREATE_LINK ${IB} ${WORK}/vin_variance.pfm SYMBOLIC)
+expect_kept(pfm_variance_is_input "is the input" ${IB} ${IA} ${IB} -o ${WORK}/vin.pfm)
 file(REMOVE ${O})
 
 # --- a frame is written whole or not at all: outputs the final rename cannot take ------------

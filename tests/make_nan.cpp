@@ -11,6 +11,8 @@
 //                                         to V, the variance kept: a bucket of garbage
 //   make_nan bigwindow IN.exr OUT.exr     IN's bytes with the header's data window made
 //                                         65536 x 65536 (a small file claiming 4 G pixels)
+//   make_nan same_pfm IN.exr C.pfm V.pfm  exit 0 when C.pfm holds IN's R,G,B and V.pfm its
+//                                         Variance.* (bit for bit), else 1 with the first difference
 //   make_nan info FILE.exr                prints "data X0 Y0 X1 Y1 display X0 Y0 X1 Y1
 //                                         nonfinite N" (N: non-finite samples, all channels)
 #include <algorithm>
@@ -137,6 +139,37 @@ int info(int argc, char** argv) {
                 s.min_y, s.max_x, s.max_y, bad);
     return 0;
 }
+
+// Compares channels [first, first + pfm.channels) of img with a PFM, bit for bit.
+bool same_channels(const firefly_tools::image& img, std::size_t first, const char* path) {
+    firefly_tools::pfm_image p;
+    const std::string e = firefly_tools::read_pfm(path, p);
+    const std::size_t n = img.channels.size(), nc = static_cast<std::size_t>(p.channels);
+    if (!e.empty() || p.width != img.width || p.height != img.height || first + nc > n) {
+        std::fprintf(stderr, "%s: %s\n", path, e.empty() ? "another size or channel count" : e.c_str());
+        return false;
+    }
+    for (std::size_t i = 0; i < p.pixels.size(); ++i) {
+        const float a = img.pixels[(i / nc) * n + first + i % nc], b = p.pixels[i];
+        if (std::memcmp(&a, &b, sizeof a) != 0) {
+            std::fprintf(stderr, "%s: value %zu is %.9g, the EXR's %.9g\n", path, i, static_cast<double>(b),
+                         static_cast<double>(a));
+            return false;
+        }
+    }
+    return true;
+}
+
+int same_pfm(int argc, char** argv) {
+    if (argc != 5) return 2;
+    firefly_tools::image img;
+    const std::string e = firefly_tools::read_exr(argv[2], {"R", "G", "B", "Variance.R", "Variance.G", "Variance.B"}, img);
+    if (!e.empty()) {
+        std::fprintf(stderr, "%s\n", e.c_str());
+        return 1;
+    }
+    return same_channels(img, 0, argv[3]) && same_channels(img, 3, argv[4]) ? 0 : 1;
+}
 #endif
 
 }  // namespace
@@ -148,6 +181,7 @@ int main(int argc, char** argv) {
         if (argc >= 2 && std::strcmp(argv[1], "shift") == 0) return argc == 6 ? shift(argc, argv) : 2;
         if (argc >= 2 && std::strcmp(argv[1], "alpha") == 0) return argc == 4 ? shift(argc, argv) : 2;
         if (argc >= 2 && std::strcmp(argv[1], "info") == 0) return info(argc, argv);
+        if (argc >= 2 && std::strcmp(argv[1], "same_pfm") == 0) return same_pfm(argc, argv);
         if (argc >= 2 && std::strcmp(argv[1], "bigwindow") == 0) return bigwindow(argc, argv);
         if (argc >= 2 && std::strcmp(argv[1], "black") == 0) return black(argc, argv);
         if (argc >= 2 && std::strcmp(argv[1], "tile") == 0) return tile(argc, argv);
