@@ -216,15 +216,7 @@ std::vector<config> configs(int k) {
 // ---------------------------------------------------------------------------------------
 // Counters.
 
-// Per-pixel relative squared error, summed over the channels; non-finite: infinite.
-double pixel_error(const float* x, const float* ref) {
-    double e = 0;
-    for (int c = 0; c < 3; ++c) {
-        const double d = static_cast<double>(x[c]) - ref[c];
-        e += d * d / (static_cast<double>(ref[c]) * ref[c] + 0.01);
-    }
-    return std::isfinite(e) ? e : HUGE_VAL;
-}
+using sim::pixel_error;  // the relMSE term summed over the channels; non-finite: infinite
 
 // A pixel is changed when a channel moved by more than float round-off (the K-buffer mean
 // sums in another order than (A + B) / 2); NaN against NaN is unchanged.

@@ -387,6 +387,19 @@ TEST_CASE("dropped bucket: a black square in half A only", "[sim][scenes]") {
     CHECK(black[0] == 32u * 32u);  // the failed bucket's square
     CHECK(black[1] == 0);
     CHECK(nonfinite == 0);
+    // The truth says what half A holds: a pixel never written holds no firefly (a perfect
+    // cleaner, which raises the square to its light and lowers every firefly, had recall 0.96).
+    sim::scene s = sim::named_scene("dropped_bucket", 1024, 540, 6);
+    s.bucket_x = 0.02;
+    const sim::frame g = sim::simulate(s);
+    std::size_t black_with_firefly = 0, in_square = 0;
+    for (std::size_t i = 0; i < g.pixels(); ++i)
+        if (g.color[0][i * 3] == 0 && g.variance[0][i * 3] == 0) {
+            ++in_square;
+            black_with_firefly += g.firefly(0, i) > 0;
+        }
+    CHECK(in_square == 128u * 128u);
+    CHECK(black_with_firefly == 0);
 }
 
 TEST_CASE("garbage bucket: a square of 1e30 in half A only, its variance as rendered", "[sim][scenes]") {
@@ -703,6 +716,60 @@ TEST_CASE("scene options at int's limits and beyond: no overflow, the same frame
     std::size_t nan_pixels = 0;
     for (std::size_t i = 0; i < f.pixels(); ++i) nan_pixels += f.nonfinite[0].empty() ? 0 : f.nonfinite[0][i];
     CHECK(nan_pixels == 8u * 8u);  // 1/8 of the width, square
+}
+
+TEST_CASE("a bright region off the geometry is background; NaN rates; counts past the frame", "[sim][errors]") {
+    // The region was marked as highlight on alpha-0 pixels too (half of them here), so a
+    // method that blackened every lit one still kept "0.51" of the highlights.
+    sim::scene s = sim::named_scene("fog", 96, 64, 5);
+    s.effects |= sim::black_background | sim::alpha_coverage;
+    const sim::frame f = sim::simulate(s);
+    std::size_t highlights = 0, off_geometry = 0;
+    for (std::size_t i = 0; i < f.pixels(); ++i)
+        if (f.highlight[i]) {
+            ++highlights;
+            off_geometry += f.alpha[i] < 1.0f;
+        }
+    CHECK(highlights > 100);
+    CHECK(off_geometry == 0);
+    // A NaN rate draws no firefly, and the expectation says so (it was NaN everywhere).
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    for (const bool caustic : {false, true}) {
+        sim::scene n = sim::named_scene(caustic ? "caustics" : "production", 48, 32, 2);
+        (caustic ? n.caustic_pixel_rate : n.firefly_pixel_rate) = nan;
+        const sim::frame g = sim::simulate(n);
+        std::size_t bad = 0;
+        for (float v : g.expected) bad += !std::isfinite(v);
+        INFO("caustic rate " << caustic);
+        CHECK(bad == 0);
+    }
+    // Counts far past what a frame can show: bounded (INT_MAX caustics asked 86 GB).
+    sim::scene c = sim::named_scene("caustics", 8, 6, 1);
+    c.caustic_count = INT_MAX;
+    c.effects |= sim::highlights;
+    c.highlight_count = INT_MAX;
+    const sim::frame g = sim::simulate(c);
+    CHECK(g.color[0].size() == 8u * 6u * 3u);
+}
+
+TEST_CASE("metrics: NaN output is no detection; made worse is judged by the relMSE term", "[sim][metrics]") {
+    const sim::frame f = sim::simulate(sim::named_scene("production", 96, 64, 4));
+    std::vector<float> c0 = f.color[0], c1 = f.color[1];
+    for (std::size_t i = 0; i < f.pixels(); ++i)
+        for (int c = 0; c < 3; ++c) {
+            if (f.firefly(0, i) > 0) c0[i * 3 + c] = std::numeric_limits<float>::quiet_NaN();
+            if (f.firefly(1, i) > 0) c1[i * 3 + c] = std::numeric_limits<float>::quiet_NaN();
+        }
+    const std::vector<float>* nan_out[2] = {&c0, &c1};
+    const sim::accuracy a = sim::evaluate(f, nan_out);
+    REQUIRE(a.visible > 0);
+    CHECK(a.recall == 0.0);
+    CHECK(a.lowered == 0);
+    // Red 1.2 off after, blue 1 off before: further in plain squared error, nearer in the
+    // relMSE term (1.2^2 / 100.01 < 1 / 49.01), which docs/accuracy.md defines "made worse" by.
+    const float ref[3] = {10.0f, 8.5f, 7.0f}, before[3] = {10.0f, 8.5f, 8.0f}, after[3] = {11.2f, 8.5f, 7.0f};
+    CHECK(sim::made_worse(before, after, ref, 1) == 0);
+    CHECK(sim::made_worse(after, before, ref, 1) == 1);
 }
 
 TEST_CASE("metrics: cleaned images that do not fit the frame give NaN, never a read past them", "[sim][metrics][errors]") {

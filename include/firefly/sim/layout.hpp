@@ -61,6 +61,7 @@ inline double draw_ratio(const scene& sc, counter_rng& r) noexcept {
 }
 // Per-sample probability from a share of pixels hit among n samples (Poisson: 1 - e^{-np}).
 inline double rate_to_probability(double rate, double n) noexcept {
+    if (!(rate > 0)) return 0.0;  // NaN too: the sampling takes it as 0, so must the expectation
     return -std::log1p(-std::clamp(rate, 0.0, 0.99)) / n;
 }
 
@@ -118,7 +119,7 @@ public:
         if (fx_ & caustics) caustic(p, x, y, b);
         if ((fx_ & bright_region) && region_.near(x + 0.5, y + 0.5) && region_.distance(x + 0.5, y + 0.5) <= region_.r) {
             p.touched |= bright_region;
-            p.highlight = true;
+            p.highlight = p.cov >= 1.0;  // as the spots: off the geometry it is background
             b = sc_.region_radiance * sc_.base;
             s = sc_.region_noise;
         }
@@ -182,7 +183,9 @@ private:
         };
         if (fx_ & highlights) {
             counter_rng r(sc_.seed, stream_of(highlights), 0, 0);
-            for (int k = 0; k < sc_.highlight_count; ++k) {
+            // Spots beyond one per pixel mark nothing new (and INT_MAX of them would take minutes).
+            const std::int64_t count = std::min<std::int64_t>(sc_.highlight_count, std::int64_t{w_} * h_);
+            for (std::int64_t k = 0; k < count; ++k) {
                 const int x0 = static_cast<int>(r.uniform() * w_), y0 = static_cast<int>(r.uniform() * h_);
                 const int rad = r.uniform() < 0.5 ? 0 : 1;
                 for (int y = y0 - rad; y <= y0 + rad; ++y)
@@ -201,8 +204,9 @@ private:
     void place_caustics() {
         counter_rng r(sc_.seed, stream_of(caustics), 0, 0);
         const double m = std::min(w_, h_);
-        const std::int64_t blobs = (std::int64_t{sc_.caustic_count} * 3 + 4) / 5;
-        for (int k = 0; k < sc_.caustic_count; ++k) {
+        const int count = std::clamp(sc_.caustic_count, 0, max_caustics);  // each costs a pass over the frame
+        const std::int64_t blobs = (std::int64_t{count} * 3 + 4) / 5;
+        for (int k = 0; k < count; ++k) {
             const double x0 = (0.15 + 0.7 * r.uniform()) * w_, y0 = (0.15 + 0.7 * r.uniform()) * h_;
             if (k < blobs) {
                 caustics_.push_back({x0, y0, x0, y0, (0.03 + 0.04 * r.uniform()) * m});

@@ -2,7 +2,8 @@
 // any method (firefly or a peer): what a method did is read off the pixels themselves.
 //
 // A pixel (in one half) is "changed" when any bit of its colour changed, and "lowered" when it
-// changed and some channel is now below the input (or the input was not finite). The detection
+// changed and some channel is now below the input (or the input was not finite; a finite input
+// made non-finite is not lowered, so NaN output earns no detection). The detection
 // counts are of lowered pixels: removing a firefly lowers its pixel, while giving removed
 // energy back (energy.hpp) only adds light, which is a change of the estimate and not a
 // detection; what it does to the image is in relmse, made_worse and energy.
@@ -92,12 +93,13 @@ inline double energy_ratio(const float* img, const float* ref, std::size_t pixel
     return sr != 0 ? si / sr : 1.0;
 }
 
-// Squared error of one RGB pixel against the reference (infinite when non-finite).
+// Error of one RGB pixel against the reference: the relMSE term summed over the channels
+// (infinite when non-finite), as docs/accuracy.md defines "made worse".
 inline double pixel_error(const float* px, const float* ref) {
     double e = 0;
     for (int c = 0; c < 3; ++c) {
         const double d = static_cast<double>(px[c]) - ref[c];
-        e += d * d;
+        e += d * d / (static_cast<double>(ref[c]) * ref[c] + 0.01);
     }
     return std::isfinite(e) ? e : std::numeric_limits<double>::infinity();
 }
@@ -127,6 +129,16 @@ inline combined_accuracy evaluate_combined(const float* combined, const std::vec
 
 namespace detail {
 // The counts of `evaluate` over any number of buffers; `orig(b)` / `clean(b)` give buffer b.
+// Some channel of the output c below the input o, or an input that was not finite.
+inline bool lowered_from(const float* o, const float* c) noexcept {
+    bool below = false, bad_input = false;
+    for (int k = 0; k < 3; ++k) {
+        below = below || c[k] < o[k];
+        bad_input = bad_input || !std::isfinite(o[k]);
+    }
+    return below || bad_input;
+}
+
 template <class Truth, class Orig, class Clean>
 accuracy evaluate_counts(const Truth& t, int k, Orig orig, Clean clean) {
     accuracy a;
@@ -141,7 +153,7 @@ accuracy evaluate_counts(const Truth& t, int k, Orig orig, Clean clean) {
             const float* o = &(*orig(b))[i * 3];
             const float* c = &(*clean(b))[i * 3];
             const bool changed = std::memcmp(o, c, 12) != 0;
-            const bool lowered = changed && !(c[0] >= o[0] && c[1] >= o[1] && c[2] >= o[2]);
+            const bool lowered = changed && lowered_from(o, c);
             const bool hit = t.firefly(b, i) > 0 || t.bad(b, i);
             clean_lowered_here = clean_lowered_here || (lowered && !hit);
             if (t.firefly(b, i) > 0 && t.firefly(b, i) > 10.0 * std::fabs(expected)) {

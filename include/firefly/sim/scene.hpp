@@ -194,6 +194,7 @@ inline std::uint32_t damage_pixel(const pixel_model& p, int x, std::size_t i, in
         out.nonfinite[b][i] = 1;
     } else if (p.dropped && b == 0) {
         for (int c = 0; c < 3; ++c) out.color[b][i * 3 + c] = out.variance[b][i * 3 + c] = 0.0f;
+        if (!out.firefly_energy[b].empty()) out.firefly_energy[b][i] = 0.0f;  // no sample was kept
     } else if (p.garbage && b == 0) {
         for (int c = 0; c < 3; ++c) out.color[b][i * 3 + c] = 1e30f;
         out.nonfinite[b][i] = 1;

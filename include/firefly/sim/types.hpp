@@ -31,6 +31,9 @@ enum effect : std::uint32_t {
                                  // of buffer 0 only, its variance as rendered (finite garbage)
 };
 
+// Most caustics a scene draws: each costs a pass over the frame.
+inline constexpr int max_caustics = 4096;
+
 struct scene {
     std::string name = "custom";
     int width = 256;
@@ -48,12 +51,12 @@ struct scene {
     bool firefly_relative = false;       // energies are multiples of the pixel's own radiance, as
                                          // added to the mean of `spp` samples (a firefly of 5
                                          // makes a pixel of 1 read 6)
-    int highlight_count = 60;            // small highlight spots
+    int highlight_count = 60;            // small highlight spots (at most one per pixel)
     double highlight_radiance = 25.0;    // x base
     double highlight_noise = 2.5;        // per-sample relative sd inside a highlight
     double wide_radius = 0.08;           // wide highlight radius, share of min(width, height)
     double nonfinite_pixel_rate = 2e-4;
-    int caustic_count = 5;               // caustic blobs and streaks
+    int caustic_count = 5;               // caustic blobs and streaks (at most max_caustics)
     double caustic_radiance = 3.0;       // brightness inside a caustic, x the pixel's radiance
     double caustic_pixel_rate = 0.5;     // share of a caustic's core pixels hit, per half
     double bucket_size = 0.125;          // failed (or dropped) bucket side, share of the width
