@@ -240,7 +240,7 @@ inline void add_detector_options(CLI::App& app, options& c) {
                    "the frame's significance: the generalized ESD's alpha, and the level of the frame-level "
                    "decision on one-half and K-buffer fireflies (a frame without fireflies is left alone in "
                    "1 - X of cases)")
-        ->type_name("X")->check(number_in(0, 1, true, true, "a number in (0, 1)"))->group("detector (every mode)");
+        ->type_name("X")->check(number_in(firefly::min_alpha, 1, false, true, "a number in [1e-280, 1)"))->group("detector (every mode)");
     app.add_flag_callback("--no-energy-return", [&c] { c.o.return_energy = c.x.return_energy = false; },
                           "remove fireflies only: do not give back the energy of fireflies that fell densely "
                           "(firefly/energy.hpp)")

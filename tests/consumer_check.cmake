@@ -29,16 +29,23 @@ if(MODE STREQUAL "find_package")
       -DCMAKE_CXX_COMPILER=${CXX} -DCONSUMER_MODE=find_package -DCMAKE_PREFIX_PATH=${WORK}/prefix)
   run(${CMAKE_COMMAND} --build "${WORK}/consumer-build")
   run("${WORK}/consumer-build/consumer")
-  # An incompatible major version must be refused.
-  execute_process(COMMAND ${CMAKE_COMMAND} -S "${CONSUMER}" -B "${WORK}/consumer-v99" -G "${GENERATOR}"
-      -DCONSUMER_MODE=find_package -DCONSUMER_VERSION=99 -DCMAKE_PREFIX_PATH=${WORK}/prefix
-      RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
-  if(rc EQUAL 0)
-    message(FATAL_ERROR "find_package(firefly 99) succeeded against an older major version")
+  # An incompatible version must be refused: another major, and before 1.0 another minor.
+  foreach(v 99 0.0.5)  # 0.1.0 is neither 99.x nor, before 1.0, 0.0.x
+    execute_process(COMMAND ${CMAKE_COMMAND} -S "${CONSUMER}" -B "${WORK}/consumer-v${v}" -G "${GENERATOR}"
+        -DCONSUMER_MODE=find_package -DCONSUMER_VERSION=${v} -DCMAKE_PREFIX_PATH=${WORK}/prefix
+        RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
+    if(rc EQUAL 0)
+      message(FATAL_ERROR "find_package(firefly ${v}) succeeded against version 0.1")
+    endif()
+  endforeach()
+  # The target carries the threads std::thread needs (-pthread on glibc before 2.34).
+  file(READ "${WORK}/prefix/share/cmake/firefly/fireflyTargets.cmake" targets)
+  if(NOT targets MATCHES "Threads::Threads")
+    message(FATAL_ERROR "firefly::firefly does not carry Threads::Threads")
   endif()
   # pkg-config users get the installed include path, and it builds the consumer.
   file(READ "${WORK}/prefix/share/pkgconfig/firefly.pc" pc)
-  if(NOT pc MATCHES "Cflags: -I" OR pc MATCHES "configured-prefix")
+  if(NOT pc MATCHES "Cflags: -I" OR NOT pc MATCHES "Libs: -pthread" OR pc MATCHES "configured-prefix")
     message(FATAL_ERROR "firefly.pc names no include path, or the configured prefix:\n${pc}")
   endif()
   find_program(PKG_CONFIG pkg-config)
@@ -50,7 +57,11 @@ if(MODE STREQUAL "find_package")
     if(NOT rc EQUAL 0)
       message(FATAL_ERROR "pkg-config --cflags firefly failed")
     endif()
-    run(${CXX} ${cflags} -fsyntax-only "${CONSUMER}/main.cpp")
+    # The user's standard is theirs: a -std= in the flags, coming after it, took C++20 away.
+    if(cflags MATCHES "-std=")
+      message(FATAL_ERROR "pkg-config --cflags firefly sets the language standard: ${cflags}")
+    endif()
+    run(${CXX} -std=c++20 ${cflags} -fsyntax-only "${CONSUMER}/main.cpp")
   endif()
 elseif(MODE STREQUAL "add_subdirectory")
   run(${CMAKE_COMMAND} -S "${CONSUMER}" -B "${WORK}/consumer-build" -G "${GENERATOR}"
@@ -70,6 +81,15 @@ elseif(MODE STREQUAL "header_drop")
     run(${CXX} -std=${std} -fsyntax-only -fno-exceptions -fno-rtti -Wall -Wextra -Wpedantic -Werror
         -I "${WORK}/vendor" "${CONSUMER}/main.cpp")
   endforeach()
+  # An older standard is refused first with what is needed, not with an error deep in a header.
+  execute_process(COMMAND ${CXX} -std=c++14 -fsyntax-only -I "${WORK}/vendor" "${CONSUMER}/main.cpp"
+                  RESULT_VARIABLE rc ERROR_VARIABLE err)
+  string(FIND "${err}" "error" first_error)
+  string(FIND "${err}" "firefly needs C++17" needs)
+  math(EXPR gap "${needs} - ${first_error}")
+  if(rc EQUAL 0 OR needs EQUAL -1 OR gap LESS 0 OR gap GREATER 40)
+    message(FATAL_ERROR "-std=c++14: not refused first with 'firefly needs C++17' (${rc})\n${err}")
+  endif()
 elseif(MODE STREQUAL "fast_math")
   # A translation unit built with -ffast-math is refused with the way out in the message
   # (floating_point.hpp), and builds when the user opts in with FIREFLY_ALLOW_FAST_MATH.

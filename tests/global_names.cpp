@@ -43,7 +43,10 @@ bool k_buffers(std::vector<std::vector<T>>& colour, std::vector<std::vector<T>>&
 
 }  // namespace
 
-int firefly_global_names_tu() {
+#ifndef FIREFLY_GLOBAL_NAMES_TU
+#define FIREFLY_GLOBAL_NAMES_TU firefly_global_names_tu
+#endif
+int FIREFLY_GLOBAL_NAMES_TU() {
     const int w = 8, h = 8;
     std::vector<float> c(w * h * 3, 0.5f), v(c.size(), 0.01f), c2 = c, v2 = v;
     std::vector<double> dc(c.begin(), c.end()), dv(v.begin(), v.end()), dc2 = dc, dv2 = dv;

@@ -149,6 +149,30 @@ TEST_CASE("1e30 fireflies next to values in [0, 1): exact statistics", "[esd][ha
     CHECK(v[r.indices[9]] == 1e30);
 }
 
+// The kept values are summarised in heap order, nearly sorted: the sum of deviations that
+// corrects the mean, added in one run, drifted by 1e-11 of the spread and put R_1 6e-12 off,
+// by an amount that changed with max_outliers (the heap's order).
+TEST_CASE("a million tightly spread floats: R_1 exact whatever the number of steps", "[esd][hard]") {
+    const std::size_t n = 1000000;
+    std::mt19937_64 g(11);
+    std::vector<float> v(n);
+    for (auto& x : v) x = static_cast<float>(0.5e-3 + 1e-3 * (static_cast<double>(g() >> 11) * 0x1.0p-53));
+    long double sum = 0;
+    for (float x : v) sum += x;
+    const long double mean = sum / n;
+    long double ss = 0;
+    for (float x : v) ss += (x - mean) * (x - mean);
+    const long double R = (*std::max_element(v.begin(), v.end()) - mean) / std::sqrt(ss / (n - 1));
+    for (const std::size_t steps : {1, 2, 15}) {
+        esd_options o;
+        o.max_outliers = steps;
+        const esd_result r = generalized_esd(v.data(), n, o);
+        REQUIRE(r.r.size() == steps);
+        INFO("steps " << steps << ": R_1 " << r.r[0] << " against " << static_cast<double>(R));
+        CHECK(std::fabs(static_cast<double>((r.r[0] - R) / R)) < 1e-13);
+    }
+}
+
 TEST_CASE("values near FLT_MAX, DBL_MAX and denormals", "[esd][hard]") {
     esd_options o;
     o.max_outliers = 3;
@@ -297,6 +321,36 @@ TEST_CASE("bound: one-sided, MAD = 0 fallback, constant data", "[bound]") {
     const bound_result wn = modified_zscore_bound(with_nan.data(), with_nan.size());
     CHECK(wn.n == 3);
     CHECK(wn.median == 2.0);
+}
+
+// alpha / k for a tiny alpha was 0 or a denormal: every lambda NaN (5e-324) and the test found
+// nothing, or lambdas 6e-12 off. Such an alpha is refused, by the test and by the detectors.
+TEST_CASE("an alpha whose alpha / n would underflow is refused", "[esd][errors]") {
+    const std::vector<double> v = {1, 2, 3, 4, 100};
+    for (const double a : {5e-324, 1e-300, 1e-281}) {
+        esd_options o;
+        o.alpha = a;
+        const esd_result r = generalized_esd(v.data(), v.size(), o);
+        INFO("alpha " << a);
+        CHECK(r.error.code() == errc::invalid_argument);
+        CHECK(r.lambda.empty());
+    }
+    esd_options o;
+    o.alpha = min_alpha;
+    const esd_result r = generalized_esd(v.data(), v.size(), o);
+    CHECK(r.error.ok());
+    for (double l : r.lambda) CHECK(std::isfinite(l));
+}
+
+// An even count's median is (a + b) / 2 rounded once: halving each first rounded both at
+// double denormals (the median of two least denormals was 0, of 3d and 3d 4d).
+TEST_CASE("bound: even-count medians of double denormals", "[bound][hard]") {
+    const double d = std::numeric_limits<double>::denorm_min();
+    const std::vector<double> pair = {d, d}, six = {3 * d, 3 * d, 3 * d, 3 * d, 0, 1000 * d};
+    CHECK(modified_zscore_bound(pair.data(), pair.size()).median == d);
+    CHECK(modified_zscore_bound(six.data(), six.size()).median == 3 * d);
+    const std::vector<double> huge = {DBL_MAX, DBL_MAX, -DBL_MAX, DBL_MAX};  // the sum overflows
+    CHECK(modified_zscore_bound(huge.data(), huge.size()).median == DBL_MAX);
 }
 
 TEST_CASE("the detector's histogram median and MAD equal a full sort, bit for bit", "[bound][hard]") {

@@ -92,8 +92,13 @@ TEST_CASE("fdr: log tails of Student's t and the normal at known points", "[fdr]
     CHECK(student_t_log_upper_tail(1e30, 3.0) < -200.0);
     // Normal: exact below 30, Mills' ratio beyond (mpmath, 30 digits).
     CHECK(normal_log_upper_tail(10.0) == Approx(-53.2312851505124705783).epsilon(1e-12));
-    CHECK(normal_log_upper_tail(30.0) == Approx(-454.321243956343197107).epsilon(1e-9));
-    CHECK(normal_log_upper_tail(40.0) == Approx(-804.608442013753788167).epsilon(1e-9));
+    // Past z = 30 the asymptotic series, to 1e-17 (four terms were 1.6e-10 off at 30); 50-digit
+    // references.
+    CHECK(normal_log_upper_tail(30.0) == Approx(-454.321243956343197107).epsilon(2e-15));
+    CHECK(normal_log_upper_tail(31.0) == Approx(-484.85396362717928858).epsilon(2e-15));
+    CHECK(normal_log_upper_tail(38.0) == Approx(-726.5572160188201301).epsilon(2e-15));
+    CHECK(normal_log_upper_tail(40.0) == Approx(-804.608442013753788167).epsilon(2e-15));
+    CHECK(normal_log_upper_tail(1000.0) == Approx(-500007.82669481218431).epsilon(2e-15));
     CHECK(normal_log_upper_tail(0.0) == Approx(std::log(0.5)));
 }
 

@@ -182,7 +182,7 @@ struct cross_buffer_options {
 inline status check_cross_buffer_options(const cross_buffer_options& o) noexcept {
     if (!(o.false_alarm > 0.0 && o.false_alarm < 0.5))
         return status{errc::invalid_argument, "false_alarm must lie in (0, 0.5)"};
-    if (!(o.alpha > 0.0 && o.alpha < 1.0)) return status{errc::invalid_argument, "alpha must lie in (0, 1)"};
+    if (const status e = check_alpha(o.alpha); !e.ok()) return e;
     if (o.radius < 0 || o.radius > 8) return status{errc::invalid_argument, "radius must lie in [0, 8]"};
     if (!(o.energy_sigma >= 1.0 && o.energy_sigma <= 64.0))
         return status{errc::invalid_argument, "energy_sigma must lie in [1, 64]"};
@@ -253,7 +253,7 @@ struct cross_thresholds {
 
 // The pooled estimate's degrees of freedom: a median of n estimates of K - 1 degrees of
 // freedom each (efficiency 2 / pi against their mean).
-inline double pooled_df(int n, int k) noexcept { return std::max(1.0, 2.0 / pi * n * (k - 1)); }
+inline double pooled_df(int n, int k) noexcept { return (std::max)(1.0, 2.0 / pi * n * (k - 1)); }
 
 // The step thresholds for every pool size n = 1..pool (the pixels that joined a pixel's
 // pooled noise), each at its own degrees of freedom; only the sizes asked for are filled.
@@ -328,7 +328,7 @@ inline double pixel_noise(const pixel_buffers& p, bool with_variance, int from =
     const double spread = rest_noise(p, from, mean, false);
     if (!with_variance) return spread;
     const double given = rest_noise(p, from, mean, true);
-    return std::isnan(given) ? spread : std::isnan(spread) ? given : std::max(given, spread);
+    return std::isnan(given) ? spread : std::isnan(spread) ? given : (std::max)(given, spread);
 }
 
 // Step i of the step-down: the i-th highest buffer against the mean of the ones below it, in
@@ -360,7 +360,7 @@ inline double step_statistic(const pixel_buffers& p, int i, double noise, bool w
     // buffer's own relative variance, the same at any level).
     const double own = rest_noise(p, i, mean, with_variance);
     const double r = mean / level, own_at_level = own >= 0 ? (with_variance ? own : own * r * r) : 0.0;
-    const double s = std::fabs(level) * std::sqrt(std::max(noise, own_at_level) * (1.0 + 1.0 / n));
+    const double s = std::fabs(level) * std::sqrt((std::max)(noise, own_at_level) * (1.0 + 1.0 / n));
     return s > 0 ? (yc - level) / s : HUGE_VAL;
 }
 
@@ -372,7 +372,7 @@ inline bool black_below(const pixel_buffers& p) noexcept {
 
 // The steps a pixel can take: at most floor(K / 2) buffers flagged, and one must stay clean.
 inline int step_limit(const pixel_buffers& p) noexcept {
-    return std::min(p.k / 2 - (p.k - p.usable), p.usable - 1);
+    return (std::min)(p.k / 2 - (p.k - p.usable), p.usable - 1);
 }
 
 // Rosner-style step-down of one pixel: the largest i whose step statistic exceeds step[i]
@@ -425,7 +425,7 @@ inline double pixel_log_p(const pixel_buffers& p, double noise, bool with_varian
             highest = t;
             // no noise to judge by (R agree exactly): the smallest p a double's log can carry
             const double l = t == HUGE_VAL ? -DBL_MAX : log_binom + student_t_log_upper_tail(t, df);
-            best = std::min(best, l);
+            best = (std::min)(best, l);
         }
         log_binom += std::log(static_cast<double>(p.k - i + 1) / i);
     }
@@ -560,7 +560,7 @@ private:
         for (int n = 1; n <= pool; ++n)
             for (int i = 1; i <= k / 2; ++i)
                 lowest_step_[static_cast<std::size_t>(i)] =
-                    std::min(lowest_step_[static_cast<std::size_t>(i)], thresholds_.at(n).step[static_cast<std::size_t>(i)]);
+                    (std::min)(lowest_step_[static_cast<std::size_t>(i)], thresholds_.at(n).step[static_cast<std::size_t>(i)]);
         const int h = b[0].color.height();
         noise_.resize(rep.pixels);
         level_.resize(rep.pixels);
@@ -626,7 +626,7 @@ private:
             rep.dropped += hr.dropped;
             rep.implausible += hr.implausible;
             rep.per_buffer[static_cast<std::size_t>(i)] = hr.found();
-            rep.left = std::max(rep.left, hr.unreachable);  // pixels: the larger half's count
+            rep.left = (std::max)(rep.left, hr.unreachable);  // pixels: the larger half's count
         }
         rep.tested = rep.pair.half[0].valid;
         return rep;
@@ -670,7 +670,7 @@ private:
             for (int c = 0; c < ncol; ++c) {
                 const double v = b.variance.load(x, y, one ? 0 : c);
                 fin += v - v;
-                sd += std::sqrt(std::max(v, 0.0));
+                sd += std::sqrt((std::max)(v, 0.0));
             }
             const double rel = (sd / ncol) / std::fabs(p.level[s]);
             if (p.level[s] != 0 && std::isfinite(rel)) p.rel_var[s] = rel * rel;
@@ -854,27 +854,27 @@ private:
     // its estimates). In a smooth region almost every neighbour joins. With fewer than 2 (a
     // pixel unlike its neighbours) its law is unknown: the window's noise.
     pooled pooled_noise(int x, int y, int w, int h, int k, bool with_var, double vp) const {
-        std::array<double, 17 * 17> all, near;  // (only the entries written are read)
+        std::array<double, 17 * 17> all, nearby;  // (only the entries written are read)
         int n = 0, joined = 0;
         const int r = options_.radius;
         const std::size_t self = index(x, y, w);
-        for (int j = std::max(0, y - r); j <= std::min(h - 1, y + r); ++j)
-            for (int i = std::max(0, x - r); i <= std::min(w - 1, x + r); ++i)
+        for (int j = (std::max)(0, y - r); j <= (std::min)(h - 1, y + r); ++j)
+            for (int i = (std::max)(0, x - r); i <= (std::min)(w - 1, x + r); ++i)
                 if (noise_[index(i, j, w)] >= 0) all[static_cast<std::size_t>(n++)] = noise_[index(i, j, w)];
         if (n == 0) return {std::numeric_limits<double>::quiet_NaN(), 0};
         const double window_noise = median_noise(all.data(), n, k, with_var);
-        const double mp = level_[self], sp = std::max(window_noise, vp) * mp * mp;  // m_p's variance x K / (pi / 2)
+        const double mp = level_[self], sp = (std::max)(window_noise, vp) * mp * mp;  // m_p's variance x K / (pi / 2)
         auto same_level = [&](std::size_t q) {
             const double mq = level_[q], d = mq - mp;
-            return d * d <= 9.0 * (detail::pi / 2.0) / k * (sp + std::max(window_noise, noise_[q]) * mq * mq);
+            return d * d <= 9.0 * (detail::pi / 2.0) / k * (sp + (std::max)(window_noise, noise_[q]) * mq * mq);
         };
-        for (int j = std::max(0, y - r); j <= std::min(h - 1, y + r); ++j)
-            for (int i = std::max(0, x - r); i <= std::min(w - 1, x + r); ++i) {
+        for (int j = (std::max)(0, y - r); j <= (std::min)(h - 1, y + r); ++j)
+            for (int i = (std::max)(0, x - r); i <= (std::min)(w - 1, x + r); ++i) {
                 const std::size_t q = index(i, j, w);
-                if (q != self && noise_[q] >= 0 && same_level(q)) near[static_cast<std::size_t>(joined++)] = noise_[q];
+                if (q != self && noise_[q] >= 0 && same_level(q)) nearby[static_cast<std::size_t>(joined++)] = noise_[q];
             }
         if (joined < 2) return {window_noise, n};
-        return {median_noise(near.data(), joined, k, with_var), joined};
+        return {median_noise(nearby.data(), joined, k, with_var), joined};
     }
 
     // p.around where some buffer of (x, y) is black, or below (a buffer at -1e-20 is black too:
@@ -967,8 +967,8 @@ private:
     // Whether a pixel of (x, y)'s window had its noise refined.
     bool near_refined(int x, int y, int w, int h) const noexcept {
         const int r = options_.radius;
-        for (int j = std::max(0, y - r); j <= std::min(h - 1, y + r); ++j)
-            for (int i = std::max(0, x - r); i <= std::min(w - 1, x + r); ++i)
+        for (int j = (std::max)(0, y - r); j <= (std::min)(h - 1, y + r); ++j)
+            for (int i = (std::max)(0, x - r); i <= (std::min)(w - 1, x + r); ++i)
                 if (refined_[index(i, j, w)]) return true;
         return false;
     }
@@ -990,7 +990,7 @@ private:
         // Below 1e-300 the thresholds stop growing; every candidate kept is far past them. A
         // hair above the kept p-value: the quantile and the tail invert each other only to
         // rounding, and the candidate at the level itself must pass.
-        const double q = std::max(std::min(std::exp(frame_log_p_) * (1 + 1e-6), options_.false_alarm), 1e-300);
+        const double q = (std::max)((std::min)(std::exp(frame_log_p_) * (1 + 1e-6), options_.false_alarm), 1e-300);
         frame_.fill(q, k, pool, wanted);
         frame_q_ = q;
     }
@@ -1063,7 +1063,7 @@ private:
                     ++n;
                     for (int c = 0; c < nc; ++c) sum[static_cast<std::size_t>(c)] += b[i].color.load(x, y, c) * scale;
                     for (int c = 0; c < nv; ++c)
-                        sum[static_cast<std::size_t>(nc + c)] += std::max(b[i].variance.load(x, y, c), 0.0) * scale;
+                        sum[static_cast<std::size_t>(nc + c)] += (std::max)(b[i].variance.load(x, y, c), 0.0) * scale;
                 }
             };
             add_clean(detail::unscaled{});
@@ -1167,7 +1167,7 @@ private:
             double add[3];
             for (int c = 0; c < 3; ++c) {
                 add[c] = l.add[0][c];
-                if (density_.removed[l.pixel]) add[c] = std::min(add[c], f * excess_[l.pixel * 3 + static_cast<std::size_t>(c)]);
+                if (density_.removed[l.pixel]) add[c] = (std::min)(add[c], f * excess_[l.pixel * 3 + static_cast<std::size_t>(c)]);
             }
             if (add_to_every_buffer(b, k, x, y, add)) given += (add[0] + add[1] + add[2]) / 3.0;
         }

@@ -59,14 +59,14 @@ inline double spatial_weight(const double* s, const double* vs, const double* xo
         var_s += calibration * vs[j];
         miss += d * d - calibration * (vo[j] + vs[nv + j]);
     }
-    const double mse_s = var_s + std::max(miss, 0.0);
+    const double mse_s = var_s + (std::max)(miss, 0.0);
     const double den = mse_s + v_other;
-    double a = den > 0 && std::isfinite(den) ? std::min(1.0, 2.0 * v_other / den) : 0.0;
+    double a = den > 0 && std::isfinite(den) ? (std::min)(1.0, 2.0 * v_other / den) : 0.0;
     if (!(a >= 0)) a = 0.0;
     // a^2 miss / (nd calibration), taken in this order: the squared bias alone may overflow (a
     // calibration of 1e-8, a bias of 1e151) where a is ~1e-186 and a^2 underflows, and 0 x Inf
     // was a NaN variance. a (a miss) <= miss, and a^2 miss <= v_other, so every step is finite.
-    bias_term = a * (a * std::max(miss, 0.0)) / (nd * calibration);
+    bias_term = a * (a * (std::max)(miss, 0.0)) / (nd * calibration);
     return a;
 }
 
@@ -80,7 +80,7 @@ double cross_half_estimate(const half_views<C, V>& own, const half_views<C, V>& 
     const int nc = own.color.channels(), nv = own.variance.channels();
     double xo[4], vo[4];
     for (int c = 0; c < nc; ++c) xo[c] = other.color.load(x, y, c);
-    for (int c = 0; c < nv; ++c) vo[c] = std::max(other.variance.load(x, y, c), 0.0);
+    for (int c = 0; c < nv; ++c) vo[c] = (std::max)(other.variance.load(x, y, c), 0.0);
     double a = 0.0, bias_term = 0.0;  // bias_term: a^2 times the squared bias, per channel
     double s[8] = {}, vs[8] = {};  // [0, n): own half, [n, 2n): other half
     // Both halves' channels side by side; RGB (6 values) at compile time. `mine` is the half
@@ -99,8 +99,8 @@ double cross_half_estimate(const half_views<C, V>& own, const half_views<C, V>& 
             },
             [&](int xx, int yy, double* v) {
                 for (int c = 0; c < nv; ++c)
-                    v[c] = std::max(mine.variance.load(xx, yy, c), 0.0) * scale,
-                    v[nv + c] = std::max(other.variance.load(xx, yy, c), 0.0) * scale;
+                    v[c] = (std::max)(mine.variance.load(xx, yy, c), 0.0) * scale,
+                    v[nv + c] = (std::max)(other.variance.load(xx, yy, c), 0.0) * scale;
             },
             s, vs);
     };
@@ -133,7 +133,7 @@ double cross_half_estimate(const half_views<C, V>& own, const half_views<C, V>& 
     // (Held within the finite range: the blend of two values near DBL_MAX may round past it.)
     for (int c = 0; c < nc; ++c) out[c] = a > 0 ? std::clamp(a * s[c] + (1 - a) * xo[c], -DBL_MAX, DBL_MAX) : xo[c];
     for (int c = 0; c < nv; ++c)
-        out[nc + c] = a > 0 ? std::min(a * a * vs[c] + bias_term + (1 - a) * (1 - a) * vo[c], DBL_MAX) : vo[c];
+        out[nc + c] = a > 0 ? (std::min)(a * a * vs[c] + bias_term + (1 - a) * (1 - a) * vo[c], DBL_MAX) : vo[c];
     return a;
 }
 

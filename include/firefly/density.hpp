@@ -115,8 +115,8 @@ public:
         rows_.resize(static_cast<std::size_t>(tw) * static_cast<std::size_t>(ph) * N);
         cols_.resize(static_cast<std::size_t>(pw) * static_cast<std::size_t>(th) * N);
         double v[N];
-        for (int j = std::max(0, r - y0); j < std::min(ph, h - y0 + r); ++j)
-            for (int i = std::max(0, r - x0); i < std::min(pw, w - x0 + r); ++i) {
+        for (int j = (std::max)(0, r - y0); j < (std::min)(ph, h - y0 + r); ++j)
+            for (int i = (std::max)(0, r - x0); i < (std::min)(pw, w - x0 + r); ++i) {
                 load(x0 - r + i, y0 - r + j, v);
                 for (int k = 0; k < N; ++k) in_[plane * k + offset(i, j, pw)] = v[k];
             }
@@ -146,7 +146,7 @@ public:
         double in[d * d][N], rows[d][N], cols[d][N], gw[r + 1][N];
         for (int a = 0; a <= r; ++a)
             for (int k = 0; k < N; ++k) gw[a][k] = g[k][a];
-        const int j0 = std::max(0, r - y), j1 = std::min(d, h - y + r), i0 = std::max(0, r - x), i1 = std::min(d, w - x + r);
+        const int j0 = (std::max)(0, r - y), j1 = (std::min)(d, h - y + r), i0 = (std::max)(0, r - x), i1 = (std::min)(d, w - x + r);
         if (j0 > 0 || i0 > 0 || j1 < d || i1 < d)  // at the frame's edge: 0 outside it
             for (auto& p : in)
                 for (double& v : p) v = 0;
@@ -282,7 +282,7 @@ public:
     // The share of pixel q's removed excess that the density gave back: sum_p w_pq s(p)
     // (q the row-major pixel index; at a pixel marked removed, 0 elsewhere).
     double taken(std::size_t q) const {
-        return s_ && !s_->share.empty() ? std::min(static_cast<double>(s_->share[q]), 1.0) : 0.0;
+        return s_ && !s_->share.empty() ? (std::min)(static_cast<double>(s_->share[q]), 1.0) : 0.0;
     }
 
 private:
@@ -316,8 +316,8 @@ private:
     double box_count(int x0, int y0, int x1, int y1) const {
         const std::size_t W = static_cast<std::size_t>(w_) + 1;
         const int r = detail::density_radius;
-        const std::size_t a0 = static_cast<std::size_t>(std::max(0, x0 - r)), a1 = static_cast<std::size_t>(std::min(w_, x1 + r));
-        const std::size_t b0 = static_cast<std::size_t>(std::max(0, y0 - r)), b1 = static_cast<std::size_t>(std::min(h_, y1 + r));
+        const std::size_t a0 = static_cast<std::size_t>((std::max)(0, x0 - r)), a1 = static_cast<std::size_t>((std::min)(w_, x1 + r));
+        const std::size_t b0 = static_cast<std::size_t>((std::max)(0, y0 - r)), b1 = static_cast<std::size_t>((std::min)(h_, y1 + r));
         const std::vector<std::uint32_t>& c = s_->count;
         return static_cast<double>(c[b1 * W + a1] + c[b0 * W + a0] - c[b0 * W + a1] - c[b1 * W + a0]);
     }
@@ -329,9 +329,9 @@ private:
     void factor_band(int b, double evidence, const Load& load, std::vector<light>& out) {
         detail::density_sums<8> sums;
         const double* g[8] = {weights_.g, weights_.g, weights_.g, weights_.g, weights_.g, weights_.g, weights_.g2, weights_.g};
-        const int y0 = b * tile_h, th = std::min(tile_h, h_ - y0);
+        const int y0 = b * tile_h, th = (std::min)(tile_h, h_ - y0);
         for (int x0 = 0; x0 < w_; x0 += tile_w) {
-            const int tw = std::min(tile_w, w_ - x0);
+            const int tw = (std::min)(tile_w, w_ - x0);
             if (!(box_count(x0, y0, x0 + tw, y0 + th) > evidence)) continue;  // no window in it passes
             sums.each(w_, h_, x0, y0, tw, th, g, load, [&](int x, int y) { return window_count(x, y) > evidence; },
                       [&](int x, int y, const double* m) { pixel(x, y, evidence, m, out); });
@@ -346,14 +346,14 @@ private:
         for (int k = 0; k < 3; ++k) m2 += (m[k] + m[3 + k]) * (m[k] + m[3 + k]), sum += m[k] + m[3 + k];
         const double js = m2 > 0 && std::isfinite(m2) ? 1.0 - evidence * m[6] / m2 : 0.0;
         // the part above the cleaned level: the wider scales return up to that level
-        const double above = sum > 0 ? 1.0 - std::max(m[7], 0.0) / sum : 0.0;
+        const double above = sum > 0 ? 1.0 - (std::max)(m[7], 0.0) / sum : 0.0;
         const double f = js > 0 && above > 0 ? js * above : 0.0;
         if (!(f > 0)) return;
         const std::size_t i = index(x, y);
         s_->factor[i] = static_cast<float>(f);
         light l{static_cast<std::uint32_t>(i), {}};
         for (int h = 0; h < 2; ++h)
-            for (int k = 0; k < 3; ++k) l.add[h][k] = static_cast<float>(std::min(f * m[3 * h + k], 3.0e38));
+            for (int k = 0; k < 3; ++k) l.add[h][k] = static_cast<float>((std::min)(f * m[3 * h + k], 3.0e38));
         out.push_back(l);
     }
 
@@ -361,12 +361,12 @@ private:
     void share_band(int b) {
         detail::density_sums<1> sums;
         const double* g[1] = {weights_.g};
-        const int r = detail::density_radius, y0 = b * tile_h, th = std::min(tile_h, h_ - y0);
+        const int r = detail::density_radius, y0 = b * tile_h, th = (std::min)(tile_h, h_ - y0);
         for (int x0 = 0; x0 < w_; x0 += tile_w) {
-            const int tw = std::min(tile_w, w_ - x0);
+            const int tw = (std::min)(tile_w, w_ - x0);
             bool any = false;
-            for (int y = std::max(0, y0 - r); y < std::min(h_, y0 + th + r) && !any; ++y)
-                for (int x = std::max(0, x0 - r); x < std::min(w_, x0 + tw + r) && !any; ++x) any = s_->factor[index(x, y)] > 0;
+            for (int y = (std::max)(0, y0 - r); y < (std::min)(h_, y0 + th + r) && !any; ++y)
+                for (int x = (std::max)(0, x0 - r); x < (std::min)(w_, x0 + tw + r) && !any; ++x) any = s_->factor[index(x, y)] > 0;
             if (!any) continue;
             sums.each(w_, h_, x0, y0, tw, th, g, [&](int x, int y, double* v) { v[0] = s_->factor[index(x, y)]; },
                       [&](int x, int y) { return s_->removed[index(x, y)] != 0; },  // where taken() is asked

@@ -70,7 +70,7 @@ inline constexpr int dropped_radius = 7;  // the window: 15 x 15 pixels
 // Whether pixel (x, y) is black: its colour channels (the first three) all 0.
 template <class C>
 bool colour_is_black(const image_view<C>& color, int x, int y) {
-    for (int c = 0; c < std::min(color.channels(), 3); ++c)
+    for (int c = 0; c < (std::min)(color.channels(), 3); ++c)
         if (color.load(x, y, c) != 0) return false;
     return true;
 }
@@ -98,9 +98,9 @@ public:
             double* t = &tail_[row_[static_cast<std::size_t>(n)]];
             double acc = -HUGE_VAL;  // the tail from the top down: log-sum-exp of the terms
             for (int a = n; a >= 0; --a) {
-                const double v = pmf[static_cast<std::size_t>(a)], hi = std::max(acc, v);
-                acc = hi == -HUGE_VAL ? hi : hi + std::log1p(std::exp(std::min(acc, v) - hi));
-                t[a] = std::min(acc, 0.0);
+                const double v = pmf[static_cast<std::size_t>(a)], hi = (std::max)(acc, v);
+                acc = hi == -HUGE_VAL ? hi : hi + std::log1p(std::exp((std::min)(acc, v) - hi));
+                t[a] = (std::min)(acc, 0.0);
             }
         }
     }
@@ -135,7 +135,7 @@ inline double log_binomial_upper_tail(int n, int c, double p, const std::vector<
         if (term < acc - 40.0) break;  // e^-40: below a double's precision of the sum
         acc += std::log1p(std::exp(term - acc));
     }
-    return std::min(acc, 0.0);
+    return (std::min)(acc, 0.0);
 }
 
 // The number of set bits of each byte value.
@@ -198,9 +198,9 @@ void dropped_row(const Mask* black, int w, int h, int y, int r, int k, const dro
         for (Mask rest = m; rest != 0; rest = static_cast<Mask>(rest & (rest - 1))) a[lowest_bit(rest)] = 0;
         const bool lone = (m & (m - 1)) == 0;  // one buffer black here: the common case
         const int only = lowest_bit(m);
-        for (int j = std::max(0, y - r); j <= std::min(h - 1, y + r); ++j) {
+        for (int j = (std::max)(0, y - r); j <= (std::min)(h - 1, y + r); ++j) {
             const Mask* l = black + static_cast<std::size_t>(j) * static_cast<std::size_t>(w);
-            const int i0 = std::max(0, x - r), i1 = std::min(w - 1, x + r);
+            const int i0 = (std::max)(0, x - r), i1 = (std::min)(w - 1, x + r);
             if (lone) {  // branch-free: a 0 mask adds nothing; several buffers: counted apart
                 int nn = 0, aa = 0;
                 Mask several = 0;

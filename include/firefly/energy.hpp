@@ -250,22 +250,22 @@ inline f4 max4(f4 a, f4 b) noexcept { return vbslq_f32(vcltq_f32(a, b), b, a); }
 template <class M>
 inline void median3x3_columns(const M* up, const M* here, const M* down, std::size_t i, std::size_t n, M* lo, M* hi) {
     for (; i < n; ++i) {
-        lo[i] = std::min(std::min(up[i], here[i]), down[i]);
-        hi[i] = std::max(std::max(up[i], here[i]), down[i]);
+        lo[i] = (std::min)((std::min)(up[i], here[i]), down[i]);
+        hi[i] = (std::max)((std::max)(up[i], here[i]), down[i]);
     }
 }
 template <class M>
 inline void median3x3_middles(const M* up, const M* here, const M* down, std::size_t i, std::size_t n, M* mid) {
-    for (; i < n; ++i) mid[i] = std::max(std::min(up[i], here[i]), std::min(std::max(up[i], here[i]), down[i]));
+    for (; i < n; ++i) mid[i] = (std::max)((std::min)(up[i], here[i]), (std::min)((std::max)(up[i], here[i]), down[i]));
 }
 template <class M>
 inline void median3x3_rows_of(const M* lo, const M* mid, const M* hi, std::size_t i, std::size_t n, M* o) {
     for (; i + 3 < n; ++i) {
-        const M l = std::max(std::max(lo[i - 3], lo[i]), lo[i + 3]);
-        const M u = std::min(std::min(hi[i - 3], hi[i]), hi[i + 3]);
+        const M l = (std::max)((std::max)(lo[i - 3], lo[i]), lo[i + 3]);
+        const M u = (std::min)((std::min)(hi[i - 3], hi[i]), hi[i + 3]);
         const M m0 = mid[i - 3], m1 = mid[i], m2 = mid[i + 3];
-        const M m = std::max(std::min(m0, m1), std::min(std::max(m0, m1), m2));
-        o[i] = std::max(std::min(l, m), std::min(std::max(l, m), u));
+        const M m = (std::max)((std::min)(m0, m1), (std::min)((std::max)(m0, m1), m2));
+        o[i] = (std::max)((std::min)(l, m), (std::min)((std::max)(l, m), u));
     }
 }
 template <class M>
@@ -319,7 +319,7 @@ public:
     // Row y of the medians into o (3 w values).
     template <class FillRow>
     void row(int y, FillRow&& fill_row, T* o) {
-        const int y0 = std::max(0, y - 1), y1 = std::min(h_ - 1, y + 1);
+        const int y0 = (std::max)(0, y - 1), y1 = (std::min)(h_ - 1, y + 1);
         for (int yy = y0; yy <= y1; ++yy) make(yy, fill_row);
         if (y == 0 || y == h_ - 1 || w_ < 3) {
             for (int x = 0; x < w_; ++x)
@@ -337,7 +337,7 @@ private:
     // a median past the range of T (a float profile of a 2 FLT_MAX sum) is kept at its
     // largest; + 0 makes a zero +0
     static T put(double v) {
-        return static_cast<T>(static_cast<T>(std::min(v, static_cast<double>(std::numeric_limits<T>::max()))) + T(0));
+        return static_cast<T>(static_cast<T>((std::min)(v, static_cast<double>((std::numeric_limits<T>::max)()))) + T(0));
     }
     double* line(int yy) { return &ring_[static_cast<std::size_t>(yy % 3) * n_]; }
     T* line_t(int yy) { return &ring_t_[static_cast<std::size_t>(yy % 3) * n_]; }
@@ -353,8 +353,8 @@ private:
     double edge(int y, int x, int c) {
         double t[9] = {};
         int k = 0;
-        for (int yy = std::max(0, y - 1); yy <= std::min(h_ - 1, y + 1); ++yy)
-            for (int xx = std::max(0, x - 1); xx <= std::min(w_ - 1, x + 1); ++xx)
+        for (int yy = (std::max)(0, y - 1); yy <= (std::min)(h_ - 1, y + 1); ++yy)
+            for (int xx = (std::max)(0, x - 1); xx <= (std::min)(w_ - 1, x + 1); ++xx)
                 t[k++] = line(yy)[static_cast<std::size_t>(xx) * 3 + static_cast<std::size_t>(c)];
         std::nth_element(t, t + k / 2, t + k);
         double m = t[k / 2];
@@ -377,7 +377,7 @@ inline void for_each_band_in_order(int h, const executor& exec, Body&& body) {
     constexpr int band = 16;
     exec.run(static_cast<std::size_t>((h + band - 1) / band), [&](std::size_t bi) {
         const int first = static_cast<int>(bi) * band;
-        body(first, std::min(h, first + band));
+        body(first, (std::min)(h, first + band));
     });
 }
 
@@ -590,7 +590,7 @@ inline void excess_sums(int p2, const tap_weights& tw, const excess_pixel* first
     for (;;) {
         const int dl = left != first && lo - left[-1].x <= r ? lo - left[-1].x : r + 1;
         const int dr = right != last && right->x - hi <= r ? right->x - hi : r + 1;
-        const int d = std::min(dl, dr);
+        const int d = (std::min)(dl, dr);
         if (d > r) break;
         const double* wk = &tw.excess[static_cast<std::size_t>(d) * 4];
         if (dl == dr)
@@ -622,9 +622,9 @@ inline void energy_x_then_y(const std::vector<P>& profile, const excess_map& whe
     constexpr std::size_t band = 64;  // node columns a task: a row's 6 sigma overlap shared by more
     s.xy.resize(static_cast<std::size_t>(ay.count) * nx * record);
     exec.run((nx + band - 1) / band, [&](std::size_t bi) {
-        const std::size_t j0 = bi * band, j1 = std::min(nx, j0 + band);
-        const int x0 = std::max(0, ax.pos2(static_cast<int>(j0)) / 2 - reach);
-        const int x1 = std::min(w - 1, ax.pos2(static_cast<int>(j1 - 1)) / 2 + reach);
+        const std::size_t j0 = bi * band, j1 = (std::min)(nx, j0 + band);
+        const int x0 = (std::max)(0, ax.pos2(static_cast<int>(j0)) / 2 - reach);
+        const int x1 = (std::min)(w - 1, ax.pos2(static_cast<int>(j1 - 1)) / 2 + reach);
         thread_local std::vector<double> line, columns;  // per thread, kept (see median3x3_rows)
         line.resize(static_cast<std::size_t>(w) * 3);
         columns.resize((j1 - j0) * hh * record);
@@ -680,7 +680,7 @@ inline void add_excess_rows(double* m, double* v, const tap_weights& tw, std::si
     };
     while (a != a_end || b != b_end) {
         const int xa = a != a_end ? a->x : INT_MAX, xb = b != b_end ? b->x : INT_MAX;
-        const int x = std::min(xa, xb);
+        const int x = (std::min)(xa, xb);
         double sum[4] = {m[static_cast<std::size_t>(x) * 3], m[static_cast<std::size_t>(x) * 3 + 1],
                          m[static_cast<std::size_t>(x) * 3 + 2], v[x]};
         if (centre)
@@ -782,7 +782,7 @@ inline void cell_sums(const std::vector<P>& profile, const excess_map& where,
                 double* o = line + x * record;
                 if (!(o[6] > 0)) continue;  // o[7] stays 0
                 const double p2 = o[3] * o[3] + o[4] * o[4] + o[5] * o[5];  // relative: |e|^2 / |P|^2
-                o[7] = p2 > 0 ? std::min(o[6] / p2, DBL_MAX) : 0.0;
+                o[7] = p2 > 0 ? (std::min)(o[6] / p2, DBL_MAX) : 0.0;
             }
         }
         const tap_weights box = box_taps(static_cast<int>(hw));
@@ -851,8 +851,8 @@ inline cell_lerp cell_lerp_at(const cell_axis& a, int p2) noexcept {
     if (a.count == 1) return {};
     const int span = 2 * a.width, off = p2 - a.centre2(0);
     if (off <= 0) return {0, 0};
-    const int j = std::min(off / span, a.count - 2);
-    return {j, std::min(p2 - a.centre2(j), span)};
+    const int j = (std::min)(off / span, a.count - 2);
+    return {j, (std::min)(p2 - a.centre2(j), span)};
 }
 
 // Bilinear interpolation of four values f00 (x0, y0), f01 (x1, y0), f10, f11 with weights ax,
@@ -899,7 +899,7 @@ inline void shrunk_ratio(const double* r, double* f) noexcept {
     // (simulated dense fireflies at 4 samples a buffer: 2.4x the error of no return).
     for (int c = 0; c < 3; ++c) {
         const double l = r[3 + c];
-        const double v = l > 0 ? keep * std::min(r[c] / l, 1.0) : 0.0;
+        const double v = l > 0 ? keep * (std::min)(r[c] / l, 1.0) : 0.0;
         f[c] = std::isfinite(v) && v > 0 ? v : 0.0;
     }
 }
@@ -954,13 +954,13 @@ struct node_lerp {
 inline node_lerp lerp_at(const node_axis& a, int x) noexcept {
     if (a.count == 1) return {};
     const int off = 2 * x - a.pos2(0);  // >= 0
-    const int j = std::min(off / (2 * a.step), a.count - 2);
+    const int j = (std::min)(off / (2 * a.step), a.count - 2);
     return {j, static_cast<double>(2 * x - a.pos2(j)) / (2.0 * a.step)};
 }
 
 // add capped channel by channel at `limit` (a negative limit: 0), into out, which it returns.
 inline const double* at_most(const double* add, const double* limit, double* out) noexcept {
-    for (int c = 0; c < 3; ++c) out[c] = std::min(add[c], std::max(limit[c], 0.0));
+    for (int c = 0; c < 3; ++c) out[c] = (std::min)(add[c], (std::max)(limit[c], 0.0));
     return out;
 }
 
@@ -969,7 +969,7 @@ inline const double* at_most(const double* add, const double* limit, double* out
 // channel by channel.
 inline const double* within_share(const double* add, const float* held, int share, double* out) noexcept {
     for (int c = 0; c < 3; ++c)
-        out[c] = std::min(add[c], std::max(share * add[c] - static_cast<double>(held[c]), 0.0));
+        out[c] = (std::min)(add[c], (std::max)(share * add[c] - static_cast<double>(held[c]), 0.0));
     return out;
 }
 
@@ -1010,11 +1010,11 @@ inline void coarse_model(const excess_map& where, int w, int h,
         s.cells.clear(), s.coarse.clear();
         return;
     }
-    const int width = std::max(1, static_cast<int>(sc.coarse / 4.0)) | 1;
+    const int width = (std::max)(1, static_cast<int>(sc.coarse / 4.0)) | 1;
     s.cx = make_cell_axis(w, width);
     s.cy = make_cell_axis(h, width);
     const double sigma = sc.coarse / width;
-    const tap_weights tw = make_taps(sigma, std::max(1, static_cast<int>(std::ceil(3.0 * sigma))), false);
+    const tap_weights tw = make_taps(sigma, (std::max)(1, static_cast<int>(std::ceil(3.0 * sigma))), false);
     const sum_order order = sum_order_for(w, h);
     cell_sums(s.profile, where, w, h, s.cx, s.cy, order, s.cells, exec);
     coarse_blur(s.cells, s.cx, s.cy, tw, order, s.coarse, exec);
@@ -1068,7 +1068,7 @@ template <class ShapeRows>
 inline void energy_model_mapped(ShapeRows&& shape_rows, shape_medians medians, int w, int h, energy_scales sc,
                                 energy_scratch& s, const executor& exec) {
     const double sigma = sc.fine;
-    const int r = std::max(1, static_cast<int>(std::ceil(3.0 * sigma)));
+    const int r = (std::max)(1, static_cast<int>(std::ceil(3.0 * sigma)));
     const tap_weights taps[2] = {make_taps(sigma, r, false), make_taps(sigma, r, true)};
     const int step = node_step(sigma);
     s.ax = make_node_axis(w, step);
@@ -1175,7 +1175,7 @@ inline void for_each_energy_row(const energy_scratch& s, int w, int h, const exe
     exec.run(static_cast<std::size_t>((h + band - 1) / band), [&](std::size_t bi) {
         energy_rows rows(s);
         std::vector<double> add(static_cast<std::size_t>(w) * 3);
-        for (int y = static_cast<int>(bi) * band; y < std::min(h, static_cast<int>(bi + 1) * band); ++y) {
+        for (int y = static_cast<int>(bi) * band; y < (std::min)(h, static_cast<int>(bi + 1) * band); ++y) {
             rows.row(y, add.data());
             f(y, add.data());
         }
@@ -1233,7 +1233,7 @@ template <class C>
 inline bool rebuilt_excess(const image_view<C>& color, int x, int y, const float* before, float* f) {
     for (int c = 0; c < 3; ++c) {
         const double d = static_cast<double>(before[c]) - color.load(x, y, c);
-        f[c] = std::isfinite(d) && d > 0 ? static_cast<float>(std::min(d, static_cast<double>(FLT_MAX))) : 0.0f;
+        f[c] = std::isfinite(d) && d > 0 ? static_cast<float>((std::min)(d, static_cast<double>(FLT_MAX))) : 0.0f;
         if (f[c] > d) f[c] = std::nextafter(f[c], 0.0f);  // never above what was taken (return_energy_to_image)
     }
     return f[0] != 0.0f || f[1] != 0.0f || f[2] != 0.0f;

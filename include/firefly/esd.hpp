@@ -47,6 +47,16 @@ struct esd_options {
     lambda_method method = lambda_method::exact;
 };
 
+// The least alpha the tests take: alpha / k (and alpha / 2k) stays a normal double for any k
+// below 2^64, where the Student-t point keeps its digits (at alpha = 5e-324, alpha / k was 0,
+// every lambda NaN and the test found nothing without saying why).
+inline constexpr double min_alpha = 1e-280;
+
+inline status check_alpha(double alpha) noexcept {
+    if (!(alpha >= min_alpha && alpha < 1.0)) return status{errc::invalid_argument, "alpha must lie in [1e-280, 1)"};
+    return {};
+}
+
 // The critical value lambda for k values still in the data (k >= 3). NaN for k < 3 or alpha
 // outside (0, 1).
 inline double esd_lambda(std::size_t k, double alpha, bool two_sided = false,
@@ -266,8 +276,8 @@ template <class T>
 esd_result generalized_esd(const T* values, std::size_t n, const esd_options& o,
                            lambda_cache& cache) {
     esd_result out;
-    if (!(o.alpha > 0.0 && o.alpha < 1.0)) {
-        out.error = status{errc::invalid_argument, "alpha must lie in (0, 1)"};
+    if (const status e = check_alpha(o.alpha); !e.ok()) {
+        out.error = e;
         return out;
     }
     std::vector<std::size_t> idx;
@@ -277,15 +287,15 @@ esd_result generalized_esd(const T* values, std::size_t n, const esd_options& o,
         const double v = static_cast<double>(values[i]);
         if (std::isfinite(v)) {
             idx.push_back(i);
-            max_abs = std::max(max_abs, std::fabs(v));
+            max_abs = (std::max)(max_abs, std::fabs(v));
         } else {
             out.nonfinite.push_back(i);
         }
     }
     const std::size_t nf = idx.size();
     out.n = nf;
-    std::size_t m = std::min(o.max_outliers, nf >= 2 ? nf - 2 : 0);
-    if (o.two_sided) m = std::min(m, nf / 2);
+    std::size_t m = (std::min)(o.max_outliers, nf >= 2 ? nf - 2 : 0);
+    if (o.two_sided) m = (std::min)(m, nf / 2);
     if (m == 0) return out;
     const int shift = detail::esd_shift(max_abs);
     auto val = [&](std::size_t i) {

@@ -98,7 +98,7 @@ struct highlight_options {
 inline bool exceeds_other_half(const highlight_options& o, double l_out, double l_other,
                                double v_other, double calibration) noexcept {
     if (!(o.min_excess_z > 0)) return true;
-    const double noise = std::sqrt(2.0 * std::max(v_other, 0.0) * calibration);
+    const double noise = std::sqrt(2.0 * (std::max)(v_other, 0.0) * calibration);
     return l_out - l_other > o.min_excess_z * noise;
 }
 
@@ -106,7 +106,7 @@ inline bool exceeds_other_half(const highlight_options& o, double l_out, double 
 // (+infinity when that noise is 0 and l_out is higher). Its normal tail is the p-value the
 // frame-level decision ranks a one-half outlier by (fdr.hpp).
 inline double excess_z(double l_out, double l_other, double v_other, double calibration) noexcept {
-    const double noise = std::sqrt(2.0 * std::max(v_other, 0.0) * calibration);
+    const double noise = std::sqrt(2.0 * (std::max)(v_other, 0.0) * calibration);
     const double d = l_out - l_other;
     return noise > 0 ? d / noise : d > 0 ? HUGE_VAL : 0.0;
 }
@@ -135,7 +135,7 @@ inline int binomial_tail_count(int n, double q, double p) noexcept {
 class variance_calibration {
 public:
     void add(double a, double b, double va, double vb) {
-        const double v = std::max(va, 0.0) + std::max(vb, 0.0);
+        const double v = (std::max)(va, 0.0) + (std::max)(vb, 0.0);
         const double d = a - b;
         if (v > 0 && std::isfinite(v) && std::isfinite(d)) ratios_.push_back(d * d / v);
     }
@@ -158,7 +158,7 @@ private:
 // sqrt(vA + vB) with the variances calibrated to variances of the mean: the standard error
 // of A + B, which the confident rule compares with the pair's rise (pair_rise).
 inline double pair_standard_error(double va, double vb, double calibration) noexcept {
-    return std::sqrt((std::max(va, 0.0) + std::max(vb, 0.0)) * calibration);
+    return std::sqrt(((std::max)(va, 0.0) + (std::max)(vb, 0.0)) * calibration);
 }
 
 // A highlight spot around a pixel, from its neighbours that passed the strict limit: the mean
@@ -187,7 +187,7 @@ inline constexpr double max_base_share = 1.0 / 3.0;
 inline double pair_rise(double la, double lb, double base) noexcept {
     const double level = std::fabs(la + lb);
     if (!(base > 0) || !(la > 0 && lb > 0)) return level;
-    const double b = std::min(base, max_base_share * std::min(la, lb));
+    const double b = (std::min)(base, max_base_share * (std::min)(la, lb));
     return std::isfinite(b) ? level - 2.0 * b : level;
 }
 
@@ -204,17 +204,17 @@ inline bool is_highlight(const highlight_options& o, double la, double lb, doubl
     const bool want_conf =
         o.rule == highlight_rule::confident || o.rule == highlight_rule::confident_and_agree;
     if (want_agree) {
-        const double lo = std::min(std::fabs(la), std::fabs(lb));
-        const double hi = std::max(std::fabs(la), std::fabs(lb));
+        const double lo = (std::min)(std::fabs(la), std::fabs(lb));
+        const double hi = (std::max)(std::fabs(la), std::fabs(lb));
         if (!(hi <= o.max_ratio * lo)) return false;
     }
     if (want_conf) {
-        const double limit = in_cluster ? std::max(o.max_relative_error, o.cluster_relative_error)
+        const double limit = in_cluster ? (std::max)(o.max_relative_error, o.cluster_relative_error)
                                         : o.max_relative_error;
         const double se = pair_standard_error(va, vb, calibration);
         const bool spot_noise = se <= limit / o.max_relative_error * spot.se;  // (limit: cluster's)
         const double rise = pair_rise(la, lb, base);
-        const double level = spot_noise ? std::max(rise, spot.sum) : rise;
+        const double level = spot_noise ? (std::max)(rise, spot.sum) : rise;
         if (!(se <= limit * level)) return false;
     }
     return true;

@@ -70,8 +70,8 @@ inline int row_of(std::size_t i, int w) noexcept { return static_cast<int>(i / s
 // |a| * b + acc without overflow; false when it would not fit a ptrdiff_t.
 inline bool add_extent(std::ptrdiff_t& acc, std::ptrdiff_t count, std::ptrdiff_t stride) noexcept {
     if (count <= 1) return true;
-    const std::ptrdiff_t max = std::numeric_limits<std::ptrdiff_t>::max();
-    if (stride == std::numeric_limits<std::ptrdiff_t>::min()) return false;  // before negating
+    const std::ptrdiff_t max = (std::numeric_limits<std::ptrdiff_t>::max)();
+    if (stride == (std::numeric_limits<std::ptrdiff_t>::min)()) return false;  // before negating
     const std::ptrdiff_t s = stride < 0 ? -stride : stride;
     if (s != 0 && (count - 1) > (max - acc) / s) return false;
     acc += (count - 1) * s;
@@ -135,7 +135,7 @@ public:
         if (channels == 0 && width > 0 && height > 0)
             return status{errc::empty_image, "an image with pixels needs at least one channel"};
         // A stride of PTRDIFF_MIN has no absolute value: refuse it before anything negates it.
-        constexpr std::ptrdiff_t lowest = std::numeric_limits<std::ptrdiff_t>::min();
+        constexpr std::ptrdiff_t lowest = (std::numeric_limits<std::ptrdiff_t>::min)();
         if (pixel_stride == lowest || row_stride == lowest || channel_stride == lowest)
             return status{errc::size_overflow, "a stride of PTRDIFF_MIN cannot be used"};
         const std::ptrdiff_t elem = static_cast<std::ptrdiff_t>(sizeof(T));
@@ -150,7 +150,7 @@ public:
         }
         if (row_stride == auto_stride) {
             const std::ptrdiff_t ps = pixel_stride < 0 ? -pixel_stride : pixel_stride;
-            if (width > 0 && ps > std::numeric_limits<std::ptrdiff_t>::max() / width)
+            if (width > 0 && ps > (std::numeric_limits<std::ptrdiff_t>::max)() / width)
                 return status{errc::size_overflow, "width x pixel stride overflows"};
             row_stride = ps * width;
         }
@@ -279,7 +279,7 @@ result<image_view<T>> make_planar_view(T* data, int width, int height, int chann
     if (row_stride == auto_stride) row_stride = e * width;
     if (plane_stride == auto_stride) {
         const std::ptrdiff_t rs = row_stride < 0 ? -row_stride : row_stride;
-        if (height > 0 && rs > std::numeric_limits<std::ptrdiff_t>::max() / height)
+        if (height > 0 && rs > (std::numeric_limits<std::ptrdiff_t>::max)() / height)
             return status{errc::size_overflow, "height x row stride overflows"};
         plane_stride = rs * height;
     }

@@ -56,7 +56,7 @@ inline int implausible_half(double la, double lb, double va, double vb, double b
     const double half_gap = std::fabs(0.5 * la - 0.5 * lb);
     const double v = va + vb;  // (hypot only where the sum overflows: it is slow)
     const double sd = v <= DBL_MAX ? std::sqrt(v) : std::hypot(std::sqrt(va), std::sqrt(vb));
-    const double half_noise = 0.5 * std::max(sd, std::min(std::fabs(la), std::fabs(lb)));
+    const double half_noise = 0.5 * (std::max)(sd, (std::min)(std::fabs(la), std::fabs(lb)));
     if (!(half_gap > bound * half_noise)) return -1;
     return std::fabs(la) >= std::fabs(lb) ? 0 : 1;
 }
@@ -84,7 +84,7 @@ inline std::uint64_t implausible_buffers(const double* level, const double* rel_
     double lo = HUGE_VAL, hi = 0;
     bool positive = true;
     for (int i = 0; i < k && i < 64; ++i)
-        if (use[i]) lo = std::min(lo, level[i]), hi = std::max(hi, level[i]), positive = positive && level[i] > 0;
+        if (use[i]) lo = (std::min)(lo, level[i]), hi = (std::max)(hi, level[i]), positive = positive && level[i] > 0;
     if (positive && hi <= bound * lo) return 0;
     int rank[64], u = 0;
     auto above = [&](int a, int b) {  // a ranks before b
@@ -114,7 +114,7 @@ inline std::uint64_t implausible_buffers(const double* level, const double* rel_
         for (int j = i; j < u; ++j) ss += (0.5 * level[rank[j]] - mean) * (0.5 * level[rank[j]] - mean);
         const double noise = vc >= 0 ? std::sqrt(vc + (known > 0 ? vr / known / n : 0.0))
                                      : std::sqrt(ss / (n - 1)) * std::sqrt(1.0 + 1.0 / n);
-        const double half_noise = std::max(noise, std::fabs(mean));
+        const double half_noise = (std::max)(noise, std::fabs(mean));
         double limit = bound;  // times C(u, i - 1)
         for (int j = 0; j < i - 1; ++j) limit *= static_cast<double>(u - j) / (j + 1);
         if (!(half_noise > 0) || !(std::fabs(0.5 * level[c] - mean) > limit * half_noise)) continue;

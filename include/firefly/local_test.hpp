@@ -229,7 +229,7 @@ inline bool local_pixel(const C* pc, std::ptrdiff_t cs, const V* pv, std::ptrdif
         fin += (v - v) + (var - var);  // NaN for any NaN or Inf
         black &= v == 0.0;
         sum += v;
-        sd += std::sqrt(std::max(var, 0.0) * scale);
+        sd += std::sqrt((std::max)(var, 0.0) * scale);
     }
     level = sum / nc;  // finite sums of floats up to FLT_MAX stay finite in double
     if (!(fin == 0.0) || black) return false;
@@ -238,9 +238,9 @@ inline bool local_pixel(const C* pc, std::ptrdiff_t cs, const V* pv, std::ptrdif
         return true;  // counts, but has no relative variance: neither tested nor pooled
     }
     const double rel = (sd / nc) / level;  // a ratio first: no overflow near FLT_MAX
-    const double r = std::max(rel * rel, min_relative_variance);
+    const double r = (std::max)(rel * rel, min_relative_variance);
     // float: r is an estimate good to a few per cent; r >= FLT_MAX means m ~ 0 anyway
-    rel_var = static_cast<float>(std::min(r, static_cast<double>(FLT_MAX)));
+    rel_var = static_cast<float>((std::min)(r, static_cast<double>(FLT_MAX)));
     return true;
 }
 
@@ -276,8 +276,8 @@ inline void local_pixel_pair(const C* c0, const C* c1, std::ptrdiff_t cs, const 
             rel_var[k] = std::numeric_limits<float>::quiet_NaN();
             continue;
         }
-        const double r = std::max(rel[k] * rel[k], min_relative_variance);
-        rel_var[k] = static_cast<float>(std::min(r, static_cast<double>(FLT_MAX)));
+        const double r = (std::max)(rel[k] * rel[k], min_relative_variance);
+        rel_var[k] = static_cast<float>((std::min)(r, static_cast<double>(FLT_MAX)));
     }
 }
 #endif
@@ -384,7 +384,7 @@ inline constexpr unsigned char sort16_network[63][2] = {
 // Equal values come out as two copies of a: the same bits, but for zeros of both signs.
 template <class T>
 inline void compare_exchange(T& a, T& b) noexcept {
-    const T lo = std::min(a, b), hi = std::max(a, b);
+    const T lo = (std::min)(a, b), hi = (std::max)(a, b);
     a = lo;
     b = hi;
 }
@@ -444,8 +444,8 @@ inline void median_and_mad(float* p, std::size_t n, double& med, double& mad) no
 // the centre excluded.
 template <class F>
 inline void for_each_neighbour(int w, int h, int x, int y, int radius, F&& f) {
-    const int x0 = std::max(x - radius, 0), x1 = std::min(x + radius, w - 1);
-    const int y0 = std::max(y - radius, 0), y1 = std::min(y + radius, h - 1);
+    const int x0 = (std::max)(x - radius, 0), x1 = (std::min)(x + radius, w - 1);
+    const int y0 = (std::max)(y - radius, 0), y1 = (std::min)(y + radius, h - 1);
     for (int yy = y0; yy <= y1; ++yy)
         for (int xx = x0; xx <= x1; ++xx)
             if (xx != x || yy != y)
@@ -480,16 +480,16 @@ inline pooled_estimate pooled_relative_variance(const std::vector<float> (&rel_v
             if (informative(rv[which][j])) p[count++] = std::log(rv[which][j]);
     });
     pooled_estimate e;
-    if (count < static_cast<std::size_t>(std::max(min_count, 1))) return e;
+    if (count < static_cast<std::size_t>((std::max)(min_count, 1))) return e;
     const double n = static_cast<double>(count);
     double med = 0, mad = 0;
     median_and_mad(p, count, med, mad);
     const double s = mad / 0.6744897501960817;
     // The sample relative variance of a skewed law is biased low: E[r^] ~ r (1 - r) for a
     // gamma law (skewness 2 sqrt(r N)); 1 + r undoes it to first order.
-    const double r = std::exp(std::min(med + 0.5 * s * s, 700.0));
-    e.typical = std::exp(std::min(med, 700.0));
-    e.r = r * (1.0 + std::min(r, 1.0));
+    const double r = std::exp((std::min)(med + 0.5 * s * s, 700.0));
+    e.typical = std::exp((std::min)(med, 700.0));
+    e.r = r * (1.0 + (std::min)(r, 1.0));
     e.nu = s > 0 ? 4.0 * n / (3.141592653589793 * s * s) : HUGE_VAL;
     return e;
 }
@@ -506,7 +506,7 @@ inline double neighbour_median(int w, int h, int x, int y, int radius, int min_c
         const float v = value(j);
         if (v == v) p[count++] = v;
     });
-    if (count < static_cast<std::size_t>(std::max(min_count, 1))) return std::numeric_limits<double>::quiet_NaN();
+    if (count < static_cast<std::size_t>((std::max)(min_count, 1))) return std::numeric_limits<double>::quiet_NaN();
     double med = 0, mad = 0;
     median_and_mad(p, count, med, mad);
     if (mad_out) *mad_out = mad;
@@ -516,7 +516,7 @@ inline double neighbour_median(int w, int h, int x, int y, int radius, int min_c
 // The lower of pixel j's two half levels, NaN unless both are usable.
 inline double lower_half_level(const std::vector<double> (&level)[2], std::size_t j) noexcept {
     const double a = level[0][j], b = level[1][j];
-    return a == a && b == b ? std::min(a, b) : std::numeric_limits<double>::quiet_NaN();
+    return a == a && b == b ? (std::min)(a, b) : std::numeric_limits<double>::quiet_NaN();
 }
 
 // The median over the neighbourhood (centre excluded) of each neighbour's lower half level
@@ -569,7 +569,7 @@ inline double neighbourhood_lower_noise(const local_test_scratch& s, int w, int 
     return neighbour_median(w, h, x, y, radius, min_count, pool, [&](std::size_t j) {
         const double a = s.level[0][j], b = s.level[1][j];
         if (!(a == a && b == b)) return std::numeric_limits<float>::quiet_NaN();
-        const float r = a < b ? s.rel_var[0][j] : b < a ? s.rel_var[1][j] : std::min(s.rel_var[0][j], s.rel_var[1][j]);
+        const float r = a < b ? s.rel_var[0][j] : b < a ? s.rel_var[1][j] : (std::min)(s.rel_var[0][j], s.rel_var[1][j]);
         return informative(r) ? r : std::numeric_limits<float>::quiet_NaN();
     }, count);
 }
@@ -607,8 +607,8 @@ inline double t_threshold(local_band_scratch& s, double q, double df) {
         s.thresholds.assign(steps * octaves + 1, 0.0);
         s.thresholds_q = q;
     }
-    const double g = std::floor(std::log2(std::max(df, 1.0)) * steps);
-    const int k = static_cast<int>(std::min(g, static_cast<double>(steps * octaves)));
+    const double g = std::floor(std::log2((std::max)(df, 1.0)) * steps);
+    const int k = static_cast<int>((std::min)(g, static_cast<double>(steps * octaves)));
     double& t = s.thresholds[static_cast<std::size_t>(k)];
     if (t == 0.0) t = student_t_upper_quantile(q, std::exp2(static_cast<double>(k) / steps));
     return t;
@@ -697,7 +697,7 @@ inline double pixel_level_log_p(double f, double m, std::size_t n) noexcept {
     if (!(f > 1.0) || !(m > 0) || n == 0) return 0.0;
     const double d1 = 4.0 * m, d2 = 4.0 / 3.141592653589793 * static_cast<double>(n) * m;
     if (m > 1e4) return normal_log_upper_tail(paulson_z(f, d1, d2));
-    return std::min(f_log_upper_tail(f, d1, d2), 0.0);
+    return (std::min)(f_log_upper_tail(f, d1, d2), 0.0);
 }
 
 // Sum and count of the usable neighbours' levels in both halves (centre excluded), in scan
@@ -810,8 +810,8 @@ inline bool spatial_screen_may(double l_hi, double approx, std::size_t count, do
 inline double neighbour_levels(const local_test_scratch& s, int w, int h, int x, int y, int radius,
                                std::vector<double>& out) {
     out.clear();
-    for (int yy = std::max(y - radius, 0); yy <= std::min(y + radius, h - 1); ++yy)
-        for (int xx = std::max(x - radius, 0); xx <= std::min(x + radius, w - 1); ++xx) {
+    for (int yy = (std::max)(y - radius, 0); yy <= (std::min)(y + radius, h - 1); ++yy)
+        for (int xx = (std::max)(x - radius, 0); xx <= (std::min)(x + radius, w - 1); ++xx) {
             if (xx == x && yy == y) continue;
             const std::size_t j = static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(xx);
             for (int half = 0; half < 2; ++half)
@@ -847,7 +847,7 @@ inline double spatial_score(double hi, double lo, double m, const std::vector<do
     if (!(p <= k.q)) return 0.0;
     // Below the smallest double the tail's log is what the normal point says (Paulson).
     log_p = p > 0 ? std::log(p) : normal_log_upper_tail(paulson_z(hi / mu, d1, d2));
-    return p > 0 ? normal_upper_quantile(p) / k.zq : static_cast<double>(std::numeric_limits<float>::max());
+    return p > 0 ? normal_upper_quantile(p) / k.zq : static_cast<double>((std::numeric_limits<float>::max)());
 }
 
 // A window's sum and count of usable levels from window_columns (known: false where not taken).
@@ -874,7 +874,7 @@ inline double local_score(const local_test_options& o, const local_levels_q& k, 
     bool pair_may = !pair_surely_below(l_hi, l_lo, r_other, zq) && pair_may_exceed(l_hi, l_lo, r_other, zq);
     if (pair_may) {
         const double t_pair = pair_statistic(l_hi, l_lo, r_other);
-        pair_may = t_pair > zq && t_pair > t_threshold(band, q, std::min(2.0 / r_other, 1e10));
+        pair_may = t_pair > zq && t_pair > t_threshold(band, q, (std::min)(2.0 / r_other, 1e10));
     }
     double mu = 0;
     bool spatial_may = false;
@@ -891,11 +891,11 @@ inline double local_score(const local_test_options& o, const local_levels_q& k, 
     ++res.screened;
     const pooled_estimate pooled = pooled_relative_variance(s.rel_var, w, h, x, y, o.radius, o.min_neighbours, band.pool);
     if (!(pooled.nu == pooled.nu)) return 0.0;
-    const double r = std::max(pooled.r, r_other);
+    const double r = (std::max)(pooled.r, r_other);
     if (pair_may) {
         const double t = pair_statistic(l_hi, l_lo, r);
         // t with 2m degrees of freedom for the gamma law, widened by the uncertainty of r~
-        const double df = std::min(std::max(1.0 / (0.5 * r + 1.0 / pooled.nu), 1.0), 1e10);
+        const double df = (std::min)((std::max)(1.0 / (0.5 * r + 1.0 / pooled.nu), 1.0), 1e10);
         const double threshold = t > zq ? t_threshold(band, q, df) : HUGE_VAL;
         if (t > threshold) {
             log_p = k.log_tests + student_t_log_upper_tail(t, df);
@@ -921,8 +921,8 @@ inline double pair_log_p(const local_test_scratch& s, int w, int x, int y, int h
     const double r_other = s.rel_var[1 - hi][i], l_hi = s.level[hi][i], l_lo = s.level[1 - hi][i];
     if (!(r_other == r_other) || !(s.rel_var[hi][i] == s.rel_var[hi][i]) || !(l_hi > l_lo)) return nan;
     if (!(pooled.nu == pooled.nu)) return nan;
-    const double r = std::max(pooled.r, r_other);
-    const double df = std::min(std::max(1.0 / (0.5 * r + 1.0 / pooled.nu), 1.0), 1e10);
+    const double r = (std::max)(pooled.r, r_other);
+    const double df = (std::min)((std::max)(1.0 / (0.5 * r + 1.0 / pooled.nu), 1.0), 1e10);
     return student_t_log_upper_tail(pair_statistic(l_hi, l_lo, r), df);
 }
 
@@ -941,7 +941,7 @@ inline void local_rows(const local_test_options& o, const local_levels_q& k, con
     for (int y = y0; y < y1; ++y) {
         const bool columns = o.spatial && o.radius == 1 && y >= 1 && y + 1 < h;
         if (columns) {
-            for (int r = std::max(ready + 1, y - 1); r <= y + 1; ++r) row_levels(s, w, r, band);
+            for (int r = (std::max)(ready + 1, y - 1); r <= y + 1; ++r) row_levels(s, w, r, band);
             ready = y + 1;
             window_columns(w, y, band);
         }
@@ -965,8 +965,8 @@ inline void local_rows(const local_test_options& o, const local_levels_q& k, con
             const double score = local_score(o, k, s, band, w, h, x, y, hi, fast, by_spatial, log_p);
             if (!(score > 1.0)) continue;
             found.half[hi].index.push_back(static_cast<std::uint32_t>(i));
-            found.half[hi].score.push_back(static_cast<float>(std::min(score, static_cast<double>(FLT_MAX))));
-            found.half[hi].log_p.push_back(std::min(log_p, 0.0));
+            found.half[hi].score.push_back(static_cast<float>((std::min)(score, static_cast<double>(FLT_MAX))));
+            found.half[hi].log_p.push_back((std::min)(log_p, 0.0));
             found.spatial += by_spatial;
         }
     }
@@ -1000,7 +1000,7 @@ status local_test(const local_half<C, V, A>& a, const local_half<C, V, A>& b, co
     // depend on the executor (nor on the number of bands).
     const int w = a.color.width(), h = a.color.height();
     const detail::local_levels_q k(options);
-    const std::size_t bands = static_cast<std::size_t>(std::min(h, 16));
+    const std::size_t bands = static_cast<std::size_t>((std::min)(h, 16));
     scratch.bands.resize(bands);
     exec.run(bands, [&](std::size_t band) {
         const int y0 = static_cast<int>(band * static_cast<std::size_t>(h) / bands);

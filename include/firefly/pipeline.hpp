@@ -109,8 +109,7 @@ struct detector_options {
 };
 
 inline status check_options(const detector_options& o) noexcept {
-    if (!(o.alpha > 0.0 && o.alpha < 1.0))
-        return status{errc::invalid_argument, "alpha must lie in (0, 1)"};
+    if (const status e = check_alpha(o.alpha); !e.ok()) return e;
     if (!(o.bound_threshold >= 0.0) || !std::isfinite(o.bound_threshold))
         return status{errc::invalid_argument, "bound threshold must be finite and >= 0"};
     if (static_cast<unsigned>(o.reduction) > static_cast<unsigned>(variance_reduction::max) ||
@@ -525,7 +524,7 @@ private:
         implausible_found_.assign(bands, {});
         exec_.run(bands, [&](std::size_t band) {
             const int y0 = static_cast<int>(band) * stddev_band_rows;
-            const int y1 = std::min(h, y0 + stddev_band_rows);
+            const int y1 = (std::min)(h, y0 + stddev_band_rows);
             const std::uint8_t* lab[2] = {halves_[0].label.data(), halves_[1].label.data()};
             const float* sd[2] = {halves_[0].sd.data(), halves_[1].sd.data()};
             for (int y = y0; y < y1; ++y)
@@ -606,7 +605,7 @@ private:
         detail::sort_by_high_word(s.keys, s.keys_tmp);
         for (std::size_t j = 0; j < s.order.size(); ++j) s.order[j] = static_cast<std::uint32_t>(s.keys[j]);
         // At most n - 2 steps: candidates beyond that rejoin the rest.
-        const std::size_t m = std::min(s.order.size(), s.valid >= 2 ? s.valid - 2 : 0);
+        const std::size_t m = (std::min)(s.order.size(), s.valid >= 2 ? s.valid - 2 : 0);
         for (std::size_t j = m; j < s.order.size(); ++j) {
             const double d = static_cast<double>(sd[s.order[j]]) - med;
             s1 += d;
@@ -620,7 +619,7 @@ private:
         if (rest_n > 0) {
             s.rest.count = rest_n;
             s.rest.mean = med + s1 / static_cast<double>(rest_n);
-            s.rest.m2 = std::max(0.0, s2 - s1 * s1 / static_cast<double>(rest_n));
+            s.rest.m2 = (std::max)(0.0, s2 - s1 * s1 / static_cast<double>(rest_n));
         }
     }
 
@@ -650,8 +649,8 @@ private:
         const int nc = colour_channels(a.color.channels()), nv = a.variance.channels();
         calibration_.clear();
         const double cells = static_cast<double>(w) * static_cast<double>(hgt) / 16384.0;
-        const int step = std::max(1, static_cast<int>(std::sqrt(cells)));
-        auto on_lattice = [step](int v, int n) { return std::min(v, n - 1 - v) % step == step / 2; };
+        const int step = (std::max)(1, static_cast<int>(std::sqrt(cells)));
+        auto on_lattice = [step](int v, int n) { return (std::min)(v, n - 1 - v) % step == step / 2; };
         for (int y = 0; y < hgt; ++y) {
             if (!on_lattice(y, hgt)) continue;
             for (int x = 0; x < w; ++x) {
@@ -730,7 +729,7 @@ private:
         if (options_.local_test) {
             const int w = hb[0]->color.width();
             const double pair = detail::pair_log_p(local_scratch_, w, x, y, h, nb.pooled);
-            if (pair == pair) log_p = std::min(log_p, pair) + std::log(2.0);
+            if (pair == pair) log_p = (std::min)(log_p, pair) + std::log(2.0);
         }
         return log_p;
     }
@@ -762,7 +761,7 @@ private:
     // among its own, whose neighbourhood's level is the spot's) and is judged at its own level.
     // la, lb: the pair's mean colour in each half.
     static double pair_base(double la, double lb, const neighbourhood& nb) {
-        return std::min(la, lb) > nb.detail_above() ? nb.smooth_level() : 0.0;
+        return (std::min)(la, lb) > nb.detail_above() ? nb.smooth_level() : 0.0;
     }
 
     // Does the pair's level stand out from its neighbourhood (the p-value, log; -inf where the
@@ -790,7 +789,7 @@ private:
         if (!(nb.lower_noise > 0 && nb.lower_noise <= 3.0) || !(nb.around > 0) || !(level > 0) ||
             !std::isfinite(level))
             return -HUGE_VAL;
-        const double reference = std::max(nb.around, nb.line);  // (line: 0 where none)
+        const double reference = (std::max)(nb.around, nb.line);  // (line: 0 where none)
         return detail::pixel_level_log_p(level / reference, 1.0 / nb.lower_noise, nb.lower_count);
     }
 
@@ -835,7 +834,7 @@ private:
         std::sort(spots_.begin(), spots_.end(), [](const strict_pair& p, const strict_pair& q) { return p.pixel < q.pixel; });
         int min_pairs[9];
         const double q = static_cast<double>(pairs_.size()) /
-                         static_cast<double>(std::max<std::size_t>(1, halves_[0].valid + halves_[1].valid) / 2 + 1);
+                         static_cast<double>((std::max<std::size_t>)(1, halves_[0].valid + halves_[1].valid) / 2 + 1);
         for (int n = 0; n <= 8; ++n) min_pairs[n] = detail::binomial_tail_count(n, q, 1e-3);
         if (ho.cluster_relative_error > ho.max_relative_error)
             for (std::size_t j = 0; j < pairs_.size(); ++j)
@@ -857,7 +856,7 @@ private:
                                              [](const strict_pair& s, std::uint32_t p) { return s.pixel < p; });
             if (it == spots_.end() || it->pixel != q) return;  // (every strict pixel has one)
             spot.sum += it->sum;
-            spot.se = std::max(spot.se, it->se);
+            spot.se = (std::max)(spot.se, it->se);
             ++n;
         });
         if (n) spot.sum /= n;
@@ -932,7 +931,7 @@ private:
     // the clean pixel-halves rebuilt as pairs, 0.024% now). A firefly on a highlight (one half
     // over the other) is decided as before; a pair whose neighbourhood cannot tell is rebuilt.
     void keep_pairs_within_noise(std::uint8_t* const (&lab)[2]) {
-        const std::size_t tested = std::max<std::size_t>(1, halves_[0].valid + halves_[1].valid);
+        const std::size_t tested = (std::max<std::size_t>)(1, halves_[0].valid + halves_[1].valid);
         auto judged = [&](std::size_t j) {  // no highlight, no firefly on one
             const std::uint32_t i = pairs_[j];
             return !((lab[0][i] | lab[1][i]) & highlight_bit) && !kept_by_frame(pair_log_p_[j * 2]) &&
@@ -1029,7 +1028,7 @@ private:
         }
     }
     bool kept_by_frame(double log_p) const noexcept {
-        return log_p <= 0 && std::max(log_p, -DBL_MAX) <= frame_level_;
+        return log_p <= 0 && (std::max)(log_p, -DBL_MAX) <= frame_level_;
     }
 
     // A list of n entries in fixed chunks on the executor: f(first, last) per chunk. The
@@ -1037,7 +1036,7 @@ private:
     template <class F>
     void for_chunks(std::size_t n, F&& f) const {
         constexpr std::size_t chunk = 4096;
-        exec_.run((n + chunk - 1) / chunk, [&](std::size_t c) { f(c * chunk, std::min(n, (c + 1) * chunk)); });
+        exec_.run((n + chunk - 1) / chunk, [&](std::size_t c) { f(c * chunk, (std::min)(n, (c + 1) * chunk)); });
     }
 
     // f(j, pool) for the n entries of a list of pixels (list[j], distinct), in chunks as
@@ -1120,14 +1119,14 @@ private:
         // too few neighbours: the pixel's own variance
         if (!(calibration > 0) || !(nb.pooled.nu == nb.pooled.nu)) return v;
         const double t = nb.pooled.typical;
-        double level = nb.around > l_other ? std::min(nb.around, std::max(l_out, l_other)) : l_other;
+        double level = nb.around > l_other ? (std::min)(nb.around, (std::max)(l_out, l_other)) : l_other;
         if (l_other > 0 && l_out > l_other && (nb.mixed() || nb.detail_above() < l_other || nb.line_through()))
             level = std::sqrt(l_out) * std::sqrt(l_other);  // detail (l_other > 0 here)
         const double pooled = t * level * level / calibration;
-        if (own_variance || !(level > 0)) return std::max(v, pooled);
+        if (own_variance || !(level > 0)) return (std::max)(v, pooled);
         // a single: less what the other half's own rise above the neighbourhood explains
-        const double rise = nb.around > 0 ? std::max(0.0, l_other - nb.around) : 0.0;
-        return std::max(v - rise * rise / calibration, pooled);
+        const double rise = nb.around > 0 ? (std::max)(0.0, l_other - nb.around) : 0.0;
+        return (std::max)(v - rise * rise / calibration, pooled);
     }
 
     // What the local test's levels say about the neighbourhood of (x, y), computed once for
@@ -1146,7 +1145,7 @@ private:
         const double med = detail::neighbourhood_lower_level(ls.level, w, h, x, y, options_.local.radius,
                                                              (options_.local.min_neighbours + 1) / 2, pool, &mad);
         nb.spread = med > 0 ? mad / med : 0.0;
-        const double bias = std::exp(std::min(0.5449521356 * std::sqrt(t) + 0.5 * t, 700.0));
+        const double bias = std::exp((std::min)(0.5449521356 * std::sqrt(t) + 0.5 * t, 700.0));
         nb.around = med * bias;
         const double line = detail::neighbourhood_line_level(ls.level, w, h, x, y);
         nb.line = line == line ? line * bias : 0.0;
@@ -1297,7 +1296,7 @@ private:
 #else
                     v[6] += both * both;
 #endif
-                    v[7] += static_cast<float>(std::min(l, static_cast<double>(FLT_MAX)));
+                    v[7] += static_cast<float>((std::min)(l, static_cast<double>(FLT_MAX)));
                 }
             };
             if (!d.run(options_.energy_density_evidence, density_, density_light_, exec_, load)) return;
@@ -1332,7 +1331,7 @@ private:
             const double f = rebuilt ? taken(e) : 0.0;
             for (int c = 0; c < 3; ++c) {
                 add[c] = l.add[k][c];
-                if (rebuilt) add[c] = std::min(add[c], f * excess[e * 3 + static_cast<std::size_t>(c)]);
+                if (rebuilt) add[c] = (std::min)(add[c], f * excess[e * 3 + static_cast<std::size_t>(c)]);
             }
             if (!(add[0] + add[1] + add[2] > 0)) continue;
             if (!add_light(hb.color, x, y, add, old)) {
@@ -1360,7 +1359,7 @@ private:
     // return_energy: the colour of every pixel to rebuild, before the rebuild.
     template <class C, class V, class A>
     void keep_before(const half_buffer<C, V, A>& hb, half_state& s) {
-        const int w = hb.color.width(), nc = std::min(hb.color.channels(), 3);
+        const int w = hb.color.width(), nc = (std::min)(hb.color.channels(), 3);
         s.before.assign(s.fix.size() * 3, 0.0f);
         for (std::size_t e = 0; e < s.fix.size(); ++e) {
             if (!s.implausible.empty() &&  // an implausible value is no light: none returned
@@ -1432,13 +1431,13 @@ private:
             const int x = detail::column_of(i, w), y = detail::row_of(i, w);
             double v[3], level = 0;
             for (int c = 0; c < 3; ++c) level += (v[c] = hb.color.load(x, y, c)) / 3.0;
-            const double rise = rose && level > 0 ? std::max(0.0, 1.0 - risen->second / level) : 0.0;
+            const double rise = rose && level > 0 ? (std::max)(0.0, 1.0 - risen->second / level) : 0.0;
             float held[3];
             bool finite = true;
             for (int c = 0; c < 3; ++c) {
                 const double d = paired ? static_cast<double>(other.color.load(x, y, c)) - v[c] : v[c] * rise;
                 finite = finite && std::isfinite(d);
-                held[c] = d > 0 ? static_cast<float>(std::min(d, static_cast<double>(FLT_MAX))) : 0.0f;
+                held[c] = d > 0 ? static_cast<float>((std::min)(d, static_cast<double>(FLT_MAX))) : 0.0f;
             }
             if (!finite) continue;
             s.held.push_back(static_cast<std::uint32_t>(i));
@@ -1565,13 +1564,6 @@ bool same_elements(const image_view<T>& a, const image_view<U>& b) noexcept {
            a.channel_stride() == b.channel_stride();
 }
 
-// w (p + q) for w a power of two below 1: one rounding where the sum is finite, so two halves
-// of the least denormal average to it (w p + w q rounded each product to 0); w p + w q where
-// the sum overflows, so DBL_MAX halves stay finite.
-inline double scaled_sum(double p, double q, double w) noexcept {
-    const double s = p + q;
-    return std::isfinite(s) || !std::isfinite(p) || !std::isfinite(q) ? w * s : w * p + w * q;
-}
 }  // namespace detail
 
 // The final image of a frame, (A + B) / 2, and the variance of that mean, (vA + vB) / 4 (a

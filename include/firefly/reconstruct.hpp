@@ -127,8 +127,8 @@ void mark_roles(const std::uint8_t* mask, std::size_t npix, std::uint8_t interes
 // Adds to s.next_ the marked pixels (state `want`) within the kernel of pixel p, once each.
 inline void queue_neighbours(std::size_t p, int w, int h, int r, std::uint8_t want, reconstruct_scratch& s) {
     const int x = detail::column_of(p, w), y = detail::row_of(p, w);
-    for (int yy = std::max(0, y - r); yy <= std::min(h - 1, y + r); ++yy)
-        for (int xx = std::max(0, x - r); xx <= std::min(w - 1, x + r); ++xx) {
+    for (int yy = (std::max)(0, y - r); yy <= (std::min)(h - 1, y + r); ++yy)
+        for (int xx = (std::max)(0, x - r); xx <= (std::min)(w - 1, x + r); ++xx) {
             if (xx == x && yy == y) continue;  // a value depends on its neighbours only
             const std::size_t q = static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(xx);
             if (s.state_[q] != want) continue;
@@ -219,7 +219,7 @@ public:
             double change = 0.0;
             for (std::size_t e = 0; e < s_.list_.size(); ++e) {
                 const double c = commit(e);
-                change = std::max(change, c);
+                change = (std::max)(change, c);
                 if (c > o.tolerance) queue_neighbours(s_.list_[e], w_, h_, r_, 2, s_);
             }
             rep.phase2_iterations = it + 1;
@@ -248,8 +248,8 @@ private:
     }
     bool has_known_neighbour(std::size_t p) const {
         const int x = static_cast<int>(p % static_cast<std::size_t>(w_)), y = static_cast<int>(p / static_cast<std::size_t>(w_));
-        for (int yy = std::max(0, y - r_); yy <= std::min(h_ - 1, y + r_); ++yy)
-            for (int xx = std::max(0, x - r_); xx <= std::min(w_ - 1, x + r_); ++xx)
+        for (int yy = (std::max)(0, y - r_); yy <= (std::min)(h_ - 1, y + r_); ++yy)
+            for (int xx = (std::max)(0, x - r_); xx <= (std::min)(w_ - 1, x + r_); ++xx)
                 if ((xx != x || yy != y) && (s_.state_[at(xx, yy)] & 0x7f) == 2) return true;
         return false;
     }
@@ -303,8 +303,8 @@ private:
             const double before = load(x, y, c);
             store(x, y, c, s_.staged_[e * stride() + static_cast<std::size_t>(c)]);
             const double after = load(x, y, c);
-            const double scale = std::max(std::fabs(before), std::fabs(after));
-            if (scale > 0 && std::isfinite(before)) change = std::max(change, std::fabs(after - before) / scale);
+            const double scale = (std::max)(std::fabs(before), std::fabs(after));
+            if (scale > 0 && std::isfinite(before)) change = (std::max)(change, std::fabs(after - before) / scale);
         }
         return change;
     }

@@ -80,7 +80,7 @@ inline void shifted_sums_below(const float* v, std::size_t n, float cut, double 
     count = 0;
     above.clear();
     for (std::size_t blk = 0; blk < n; blk += block_size) {
-        const std::size_t e = std::min(n, blk + block_size);
+        const std::size_t e = (std::min)(n, blk + block_size);
         std::size_t i = blk;
         double b1 = 0, b2 = 0;
 #if defined(__SSE2__) || defined(_M_X64)
@@ -164,12 +164,20 @@ inline std::size_t count_and_collect(const float* v, std::size_t n, float in_lo,
     return j;
 }
 
+// w (p + q) for w a power of two below 1: one rounding where the sum is finite, so two halves
+// of the least denormal average to it (w p + w q rounded each product to 0); w p + w q where
+// the sum overflows, so DBL_MAX halves stay finite.
+inline double scaled_sum(double p, double q, double w) noexcept {
+    const double s = p + q;
+    return std::isfinite(s) || !std::isfinite(p) || !std::isfinite(q) ? w * s : w * p + w * q;
+}
+
 // Sum of f(i) for i in [0, n) in fixed blocks.
 template <class F>
 double blocked_sum(std::size_t n, F&& f) {
     double total = 0.0;
     for (std::size_t b = 0; b < n; b += block_size) {
-        const std::size_t e = std::min(n, b + block_size);
+        const std::size_t e = (std::min)(n, b + block_size);
         double s = 0.0;
         for (std::size_t i = b; i < e; ++i) s += f(i);
         total += s;
@@ -192,15 +200,24 @@ summary summary_of(std::size_t n, Value&& value, Keep&& keep) {
     if (count == 0) return s;
     s.count = count;
     const double mean0 = sum / static_cast<double>(count);
-    double c = 0.0;  // sum of deviations: corrects the mean's rounding (the "corrected two-pass")
-    const double m2 = detail::blocked_sum(n, [&](std::size_t i) {
-        if (!keep(i)) return 0.0;
-        const double d = static_cast<double>(value(i)) - mean0;
-        c += d;
-        return d * d;
-    });
+    // Squared deviations and their plain sum c, which corrects the mean's rounding (the
+    // "corrected two-pass"), both in blocks: c summed in one run drifted with the order of the
+    // values (R_i of the ESD off by 7e-12 over a million values in heap order).
+    double m2 = 0.0, c = 0.0;
+    for (std::size_t b = 0; b < n; b += detail::block_size) {
+        const std::size_t e = (std::min)(n, b + detail::block_size);
+        double sq = 0.0, dev = 0.0;
+        for (std::size_t i = b; i < e; ++i) {
+            if (!keep(i)) continue;
+            const double d = static_cast<double>(value(i)) - mean0;
+            dev += d;
+            sq += d * d;
+        }
+        m2 += sq;
+        c += dev;
+    }
     s.mean = mean0 + c / static_cast<double>(count);
-    s.m2 = std::max(0.0, m2 - c * c / static_cast<double>(count));
+    s.m2 = (std::max)(0.0, m2 - c * c / static_cast<double>(count));
     return s;
 }
 
@@ -229,7 +246,7 @@ inline void sort_by_high_word(std::vector<std::uint64_t>& keys, std::vector<std:
     constexpr int bits = 11;
     constexpr std::size_t buckets = std::size_t{1} << bits;
     std::uint64_t top = 0;
-    for (const std::uint64_t k : keys) top = std::max(top, k >> 32);
+    for (const std::uint64_t k : keys) top = (std::max)(top, k >> 32);
     tmp.resize(keys.size());
     std::array<std::size_t, buckets> start;
     for (int shift = 32; shift < 64 && (shift == 32 || (top >> (shift - 32)) != 0); shift += bits) {
@@ -259,7 +276,7 @@ bool select_pair(std::size_t n, Key&& key, Keep&& keep, std::size_t k, double& k
             ++total;
         }
     if (k >= total) return false;
-    const std::size_t k2 = std::min(k + 1, total - 1);
+    const std::size_t k2 = (std::min)(k + 1, total - 1);
     // Buckets holding ranks k and k2, and how many values lie below the first.
     std::size_t below = 0, b1 = 0;
     while (below + hist[b1] <= k) below += hist[b1++];
@@ -286,7 +303,7 @@ bool median_of(std::size_t n, Key&& key, Keep&& keep, std::size_t count, double&
     if (count == 0) return false;
     double a, b;
     if (!select_pair(n, key, keep, (count - 1) / 2, a, b, scratch)) return false;
-    median = (count % 2 == 1) ? a : 0.5 * a + 0.5 * b;
+    median = (count % 2 == 1) ? a : detail::scaled_sum(a, b, 0.5);
     return true;
 }
 
@@ -382,12 +399,12 @@ private:
         const double hi = top < buckets ? static_cast<double>(lower_edge(static_cast<std::uint32_t>(top))) : HUGE_VAL;
         // Counts of values surely inside / possibly inside [med - d, med + d].
         auto range = [&](double d, bool outer) -> std::uint64_t {
-            const double lo_v = std::max(med - d, 0.0), hi_v = med + d;
+            const double lo_v = (std::max)(med - d, 0.0), hi_v = med + d;
             long bl = static_cast<long>(bucket(static_cast<float>(lo_v)));
             long br = hi_v >= 3.0e38 ? static_cast<long>(buckets) - 1 : static_cast<long>(bucket(static_cast<float>(hi_v)));
             if (outer) {
-                bl = std::max(bl - 1, 0L);
-                br = std::min(br + 1, static_cast<long>(buckets) - 1);
+                bl = (std::max)(bl - 1, 0L);
+                br = (std::min)(br + 1, static_cast<long>(buckets) - 1);
                 if (med - d <= 0) bl = 0;
             } else {
                 bl = (med - d <= 0) ? 0 : bl + 1;
@@ -395,7 +412,7 @@ private:
             }
             return br < bl ? 0 : prefix[static_cast<std::size_t>(br) + 1] - prefix[static_cast<std::size_t>(bl)];
         };
-        const double dmax = std::isfinite(hi) ? std::max(med, hi - med) * 2.0 + 1.0 : HUGE_VAL;
+        const double dmax = std::isfinite(hi) ? (std::max)(med, hi - med) * 2.0 + 1.0 : HUGE_VAL;
         if (range(0.0, true) <= k && std::isfinite(dmax)) {
             double a = 0.0, b = dmax;
             for (int it = 0; it < 80; ++it) {
@@ -405,7 +422,7 @@ private:
             d_lo = a;
         }
         if (std::isfinite(dmax) && range(dmax, false) >= k2 + 1) {
-            double a = std::max(d_lo, 0.0), b = dmax;
+            double a = (std::max)(d_lo, 0.0), b = dmax;
             for (int it = 0; it < 80; ++it) {
                 const double m = 0.5 * (a + b);
                 if (range(m, false) >= k2 + 1) b = m; else a = m;
@@ -437,11 +454,11 @@ private:
         const bool has_inner = d_lo >= 0;
         const float in_lo = has_inner ? float_at_or_above(med - d_lo) : 1.0f;
         const float in_hi = has_inner ? float_at_or_below(med + d_lo) : 0.0f;
-        const float out_lo = std::max(float_at_or_below(med - d_hi), 0.0f), out_hi = float_at_or_above(med + d_hi);
+        const float out_lo = (std::max)(float_at_or_below(med - d_hi), 0.0f), out_hi = float_at_or_above(med + d_hi);
         // The band holds at most the values of the buckets its two intervals touch.
         auto count_buckets = [&](float a, float b) -> std::size_t {
             if (!(a <= b)) return 0;
-            const std::size_t ba = bucket(std::max(a, 0.0f)), bb = std::min<std::size_t>(bucket(b), buckets - 1);
+            const std::size_t ba = bucket((std::max)(a, 0.0f)), bb = (std::min<std::size_t>)(bucket(b), buckets - 1);
             return bb < ba ? 0 : static_cast<std::size_t>(prefix[bb + 1] - prefix[ba]);
         };
         const std::size_t cap = has_inner ? count_buckets(out_lo, in_lo) + count_buckets(in_hi, out_hi)

@@ -100,7 +100,7 @@ inline double reduce_variance(const V* px, std::ptrdiff_t cstride, int channels,
         }
     }
     if (n == 1) return v[0];
-    if (how == variance_reduction::max) return std::max(v[0], std::max(v[1], v[2]));
+    if (how == variance_reduction::max) return (std::max)(v[0], (std::max)(v[1], v[2]));
     if (how == variance_reduction::luminance && n == 3) return luminance(v[0], v[1], v[2]);
     return (v[0] + v[1] + v[2]) / n;
 }
@@ -155,7 +155,7 @@ inline R classify_pixel(const R (&c)[3], const R (&v)[3], R a, std::uint8_t& lab
     const R v0 = v[0] > R(0) ? v[0] : R(0), v1 = v[1] > R(0) ? v[1] : R(0), v2 = v[2] > R(0) ? v[2] : R(0);
     R var;
     if (NV == 1) var = v0;
-    else if (How == variance_reduction::max) var = std::max(v0, std::max(v1, v2));
+    else if (How == variance_reduction::max) var = (std::max)(v0, (std::max)(v1, v2));
     else if (How == variance_reduction::luminance && NV == 3) var = luminance(v0, v1, v2);
     else var = (v0 + v1 + v2) / R(NV);
     const bool ignored = black | !covered;
@@ -207,7 +207,7 @@ inline float classify_bits(float cf0, float cf1, float cf2, float vf0, float vf1
     const float v2 = bits_float(v2b & mag & (n2 - 1u));
     float var;
     if (NV == 1) var = v0;
-    else if (How == variance_reduction::max) var = std::max(v0, std::max(v1, v2));
+    else if (How == variance_reduction::max) var = (std::max)(v0, (std::max)(v1, v2));
     else if (How == variance_reduction::luminance && NV == 3) var = luminance(v0, v1, v2);
     else var = v0 / float(NV) + v1 / float(NV) + v2 / float(NV);  // no overflow at FLT_MAX
     const std::uint32_t ignored = black | (covered ^ 1u);
@@ -613,14 +613,14 @@ stddev_counts stddev_band(const image_view<C>& color, const image_view<V>& varia
                           variance_reduction how, float* sd, std::uint8_t* label, std::size_t band) noexcept {
     const int w = color.width();
     const int y0 = static_cast<int>(band) * stddev_band_rows;
-    const int rows = std::min(stddev_band_rows, color.height() - y0);
+    const int rows = (std::min)(stddev_band_rows, color.height() - y0);
     const std::size_t at = static_cast<std::size_t>(y0) * static_cast<std::size_t>(w);
     return stddev_pass(*color.subview(0, y0, w, rows), *variance.subview(0, y0, w, rows),
                        alpha.empty() ? alpha : *alpha.subview(0, y0, w, rows), how, sd + at, label + at);
 }
 
 inline std::size_t stddev_bands(int height) noexcept {  // (in size_t: no int overflow near INT_MAX)
-    const std::size_t rows = static_cast<std::size_t>(std::max(height, 0)), band = stddev_band_rows;
+    const std::size_t rows = static_cast<std::size_t>((std::max)(height, 0)), band = stddev_band_rows;
     return (rows + band - 1) / band;
 }
 }  // namespace detail

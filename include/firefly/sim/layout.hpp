@@ -23,9 +23,9 @@ struct capsule {  // the points within r of the segment (x0, y0)-(x1, y1), in pi
         const double t = len2 > 0 ? std::clamp(((x - x0) * dx + (y - y0) * dy) / len2, 0.0, 1.0) : 0.0;
         return std::hypot(x - (x0 + t * dx), y - (y0 + t * dy));
     }
-    bool near(double x, double y) const noexcept {  // within the bounding box
-        return x >= std::min(x0, x1) - r && x <= std::max(x0, x1) + r && y >= std::min(y0, y1) - r &&
-               y <= std::max(y0, y1) + r;
+    bool in_box(double x, double y) const noexcept {  // within the bounding box
+        return x >= (std::min)(x0, x1) - r && x <= (std::max)(x0, x1) + r && y >= (std::min)(y0, y1) - r &&
+               y <= (std::max)(y0, y1) + r;
     }
 };
 
@@ -70,20 +70,20 @@ class layout {
     static constexpr std::uint32_t buckets = failed_bucket | dropped_bucket | garbage_bucket;
 
 public:
-    explicit layout(const scene& sc) : sc_(sc), w_(std::max(sc.width, 0)), h_(std::max(sc.height, 0)), fx_(sc.effects) {
-        const double n = std::max(sc.spp, 2);
+    explicit layout(const scene& sc) : sc_(sc), w_((std::max)(sc.width, 0)), h_((std::max)(sc.height, 0)), fx_(sc.effects) {
+        const double n = (std::max)(sc.spp, 2);
         if (fx_ & fireflies)
-            p_ff_ = sc.firefly_probability > 0 ? std::min(sc.firefly_probability, 1.0)
+            p_ff_ = sc.firefly_probability > 0 ? (std::min)(sc.firefly_probability, 1.0)
                                                : rate_to_probability(sc.firefly_pixel_rate, n);
         if (fx_ & (highlights | wide_highlight)) place_spots();
         if (fx_ & caustics) place_caustics();
         if (fx_ & log_gradient)
             for (int x = 0; x < w_; ++x)
                 log_ramp_.push_back(0.02 * std::pow(1000.0, w_ > 1 ? static_cast<double>(x) / (w_ - 1) : 0.5));
-        const double m = std::min(w_, h_);
+        const double m = (std::min)(w_, h_);
         region_ = {sc.region_x0 * w_, sc.region_y0 * h_, sc.region_x1 * w_, sc.region_y1 * h_, sc.region_radius * m};
         // (a bucket is at most the frame's size and starts within a frame's size of it)
-        const int side = clamped_int(std::round(sc.bucket_size * w_), 0, std::max(w_, h_));
+        const int side = clamped_int(std::round(sc.bucket_size * w_), 0, (std::max)(w_, h_));
         bx_ = clamped_int(sc.bucket_x * w_, -w_, w_);
         by_ = clamped_int(sc.bucket_y * h_, -h_, h_);
         bx1_ = bx_ + side;
@@ -96,7 +96,7 @@ public:
         if (!(fx_ & (black_background | alpha_coverage))) return 1.0;
         const double cx = 0.5 * w_, cy = 0.5 * h_, rx = 0.46 * w_, ry = 0.46 * h_;
         const double u = (x + 0.5 - cx) / rx, v = (y + 0.5 - cy) / ry;
-        const double d = (std::sqrt(u * u + v * v) - 1.0) * std::min(rx, ry);  // ~signed distance
+        const double d = (std::sqrt(u * u + v * v) - 1.0) * (std::min)(rx, ry);  // ~signed distance
         return std::clamp(0.5 - d, 0.0, 1.0);  // one-pixel soft rim
     }
 
@@ -117,7 +117,7 @@ public:
         if (fx_ & varying_noise)
             scale(p, varying_noise, s, 0.25 + 1.75 * (h_ > 1 ? static_cast<double>(y) / (h_ - 1) : 0.5));
         if (fx_ & caustics) caustic(p, x, y, b);
-        if ((fx_ & bright_region) && region_.near(x + 0.5, y + 0.5) && region_.distance(x + 0.5, y + 0.5) <= region_.r) {
+        if ((fx_ & bright_region) && region_.in_box(x + 0.5, y + 0.5) && region_.distance(x + 0.5, y + 0.5) <= region_.r) {
             p.touched |= bright_region;
             p.highlight = p.cov >= 1.0;  // as the spots: off the geometry it is background
             b = sc_.region_radiance * sc_.base;
@@ -144,7 +144,7 @@ public:
         p.s = s;
         p.p_ff = p.cov > 0 ? p_ff_ : 0.0;
         if (p.cov <= 0) p.p_caustic = 0.0;
-        p.energy_scale = sc_.firefly_relative ? (p.mu[0] + p.mu[1] + p.mu[2]) / 3.0 * std::max(sc_.spp, 2) : sc_.base;
+        p.energy_scale = sc_.firefly_relative ? (p.mu[0] + p.mu[1] + p.mu[2]) / 3.0 * (std::max)(sc_.spp, 2) : sc_.base;
         return p;
     }
 
@@ -166,12 +166,12 @@ private:
     void caustic(pixel_model& p, int x, int y, double& b) const noexcept {
         double c = 0;  // 1 in a caustic's core, falling to 0 at its rim
         for (const capsule& k : caustics_)
-            if (k.near(x + 0.5, y + 0.5))
-                c = std::max(c, std::clamp((1.0 - k.distance(x + 0.5, y + 0.5) / k.r) / 0.4, 0.0, 1.0));
+            if (k.in_box(x + 0.5, y + 0.5))
+                c = (std::max)(c, std::clamp((1.0 - k.distance(x + 0.5, y + 0.5) / k.r) / 0.4, 0.0, 1.0));
         if (c <= 0) return;
         p.touched |= caustics;
         b *= 1.0 + (sc_.caustic_radiance - 1.0) * c;
-        p.p_caustic = rate_to_probability(sc_.caustic_pixel_rate * c, std::max(sc_.spp, 2));
+        p.p_caustic = rate_to_probability(sc_.caustic_pixel_rate * c, (std::max)(sc_.spp, 2));
     }
 
     void place_spots() {
@@ -184,7 +184,7 @@ private:
         if (fx_ & highlights) {
             counter_rng r(sc_.seed, stream_of(highlights), 0, 0);
             // Spots beyond one per pixel mark nothing new (and INT_MAX of them would take minutes).
-            const std::int64_t count = std::min<std::int64_t>(sc_.highlight_count, std::int64_t{w_} * h_);
+            const std::int64_t count = (std::min<std::int64_t>)(sc_.highlight_count, std::int64_t{w_} * h_);
             for (std::int64_t k = 0; k < count; ++k) {
                 const int x0 = static_cast<int>(r.uniform() * w_), y0 = static_cast<int>(r.uniform() * h_);
                 const int rad = r.uniform() < 0.5 ? 0 : 1;
@@ -193,7 +193,7 @@ private:
             }
         }
         if (fx_ & wide_highlight) {
-            const double wr = sc_.wide_radius * std::min(w_, h_), wx = 0.3 * w_, wy = 0.35 * h_;
+            const double wr = sc_.wide_radius * (std::min)(w_, h_), wx = 0.3 * w_, wy = 0.35 * h_;
             for (int y = clamped_int(wy - wr - 1, 0, h_); y < clamped_int(wy + wr + 2, 0, h_); ++y)
                 for (int x = clamped_int(wx - wr - 1, 0, w_); x < clamped_int(wx + wr + 2, 0, w_); ++x)
                     if (std::hypot(x + 0.5 - wx, y + 0.5 - wy) <= wr) mark(x, y, wide_highlight);
@@ -203,7 +203,7 @@ private:
     // Caustics: blobs (60%) and thin streaks, away from the frame's edge.
     void place_caustics() {
         counter_rng r(sc_.seed, stream_of(caustics), 0, 0);
-        const double m = std::min(w_, h_);
+        const double m = (std::min)(w_, h_);
         const int count = std::clamp(sc_.caustic_count, 0, max_caustics);  // each costs a pass over the frame
         const std::int64_t blobs = (std::int64_t{count} * 3 + 4) / 5;
         for (int k = 0; k < count; ++k) {

@@ -83,9 +83,9 @@ public:
     // Failures before the next success of a Bernoulli(p) process.
     std::uint64_t geometric(double p) noexcept {
         if (p >= 1.0) return 0;
-        if (p <= 0.0) return std::numeric_limits<std::uint64_t>::max();
+        if (p <= 0.0) return (std::numeric_limits<std::uint64_t>::max)();
         const double g = std::floor(std::log(open_uniform()) / std::log1p(-p));
-        return g >= 1.8e19 ? std::numeric_limits<std::uint64_t>::max() : static_cast<std::uint64_t>(g);
+        return g >= 1.8e19 ? (std::numeric_limits<std::uint64_t>::max)() : static_cast<std::uint64_t>(g);
     }
     // Gamma(shape, 1) quantile at normal score z, Wilson-Hilferty (accurate for shape >= ~10).
     static double wilson_hilferty(double shape, double z) noexcept {

@@ -75,7 +75,7 @@ inline sample_moments loop_samples(counter_rng& r, distribution d, double s, std
         s2 += d1 * d1;
     }
     const double dm = static_cast<double>(m);
-    return {1.0 + s1 / dm, std::max(s2 - s1 * s1 / dm, 0.0)};
+    return {1.0 + s1 / dm, (std::max)(s2 - s1 * s1 / dm, 0.0)};
 }
 
 // Central moments of R (mean 1, variance s^2): third, and excess kurtosis.

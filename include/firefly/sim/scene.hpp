@@ -63,7 +63,7 @@ void bernoulli_trials(counter_rng& r, double p, std::uint64_t trials, F&& on_suc
 // none): the first hit's position from its law truncated to n, then geometric gaps. One draw
 // when there is no hit. For per-pixel rates (caustics).
 inline void pixel_hits(hits& h, counter_rng& r, double p, std::uint64_t n, const scene& sc, double energy_scale) noexcept {
-    const double q0 = std::exp(static_cast<double>(n) * std::log1p(-std::min(p, 1.0)));
+    const double q0 = std::exp(static_cast<double>(n) * std::log1p(-(std::min)(p, 1.0)));
     const double u = r.uniform();
     if (u < q0) return;
     const double v = (u - q0) / (1.0 - q0);  // uniform, given at least one hit
@@ -152,7 +152,7 @@ inline std::uint32_t simulate_pixel(const scene& sc, const pixel_model& p, std::
         counter_rng r(sc.seed, caustics, i, static_cast<std::uint64_t>(b));
         pixel_hits(h, r, p.p_caustic, n, sc, p.energy_scale);
     }
-    const std::uint64_t k = std::min(h.count, n), m = n - k;
+    const std::uint64_t k = (std::min)(h.count, n), m = n - k;
     counter_rng base(sc.seed, base_noise, i, static_cast<std::uint64_t>(b));
     const sample_moments o = draw_samples(base, sc.samples, p.s, m, &nc);
     const double dm = static_cast<double>(m), dk = static_cast<double>(k), dn = static_cast<double>(n);
@@ -161,7 +161,7 @@ inline std::uint32_t simulate_pixel(const scene& sc, const pixel_model& p, std::
         const double mu = p.mu[c] * p.sign;
         double mean = mu * o.mean, m2 = mu * mu * o.m2;
         if (k > 0) {  // merge with the k firefly samples (each channel gets the firefly's energy)
-            const double fm = h.sum / dk, fm2 = std::max(h.sq - dk * fm * fm, 0.0);
+            const double fm = h.sum / dk, fm2 = (std::max)(h.sq - dk * fm * fm, 0.0);
             const double d = fm - mean;
             mean += d * dk / dn;
             m2 += fm2 + d * d * dm * dk / dn;
@@ -205,8 +205,8 @@ inline std::uint32_t damage_pixel(const pixel_model& p, int x, std::size_t i, in
 inline void allocate(const scene& sc, int k, buffers& f) {
     const std::size_t np = f.pixels();
     const std::uint32_t fx = sc.effects;
-    const std::int64_t total = 2 * std::int64_t{std::max(sc.spp, 2)};  // (no overflow at INT_MAX)
-    for (int b = 0; b < k; ++b) f.spp.push_back(static_cast<int>(std::max<std::int64_t>(total / k + (b < total % k ? 1 : 0), 2)));
+    const std::int64_t total = 2 * std::int64_t{(std::max)(sc.spp, 2)};  // (no overflow at INT_MAX)
+    for (int b = 0; b < k; ++b) f.spp.push_back(static_cast<int>((std::max<std::int64_t>)(total / k + (b < total % k ? 1 : 0), 2)));
     f.color.assign(static_cast<std::size_t>(k), std::vector<float>(np * 3, 0.0f));
     f.variance = f.color;
     f.firefly_energy.assign(static_cast<std::size_t>(k), std::vector<float>());
@@ -227,10 +227,10 @@ inline void allocate(const scene& sc, int k, buffers& f) {
 // Simulates k >= 2 independent buffers of one frame (k below 2 counts as 2; every buffer gets
 // at least 2 samples). k = 2 gives the halves of simulate(), bit for bit.
 inline buffers simulate_buffers(const scene& sc, int k) {
-    k = std::max(k, 2);
+    k = (std::max)(k, 2);
     buffers f;
-    f.width = std::max(sc.width, 0);
-    f.height = std::max(sc.height, 0);
+    f.width = (std::max)(sc.width, 0);
+    f.height = (std::max)(sc.height, 0);
     f.effects = sc.effects;
     detail::allocate(sc, k, f);
     const detail::layout lay(sc);
