@@ -20,10 +20,17 @@
 //   relmse             mean over pixels and channels of (x - ref)^2 / (ref^2 + 0.01) for the
 //                      combined image (A + B) / 2 against the expected radiance
 //   changed            changed pixels (pixel x half)
-//   made_worse         changed pixels (pixel x half) whose squared error against the expected
-//                      radiance grew (a non-finite input counts as an infinite error)
+//   made_worse         changed pixels (pixel x half) whose error against the expected radiance
+//                      grew: the relMSE term summed over the channels (a non-finite input
+//                      counts as an infinite error)
 //   energy             mean brightness of the combined image / the expected image's, over all
 //                      pixels, highlight pixels, and non-highlight pixels (1: no energy lost)
+//
+// With nothing to count a ratio reads its best value: recall, precision and highlight_kept 1
+// and false_positive 0 with no visible firefly, lowered pixel, highlight or clean pixel, relmse
+// 0 over no pixel, energy 1 where the expected image is black (and the highlight and rest
+// energies 1 when the highlight mask does not fit the image). relmse charges a non-finite value
+// 1e6 and a finite one its own error, however large.
 //
 // For K buffers (simulate_buffers): evaluate_buffers, the same counts over buffers, relmse and
 // energy on the combined image (the spp-weighted mean of the cleaned buffers); and
