@@ -450,10 +450,18 @@ std::string write_pfm_to(firefly_tools::output_set& set, const std::string& path
 }
 
 // The main output: OpenEXR, or for a name ending .pfm colour there and the variance of the
-// mean beside it (a PFM has no alpha, so a frame with alpha is refused rather than cut).
+// mean beside it. A PFM has no alpha and no windows, so a frame with alpha, or whose data
+// window is not its display window at the origin, is refused rather than cut or moved.
 std::string write_main_to(firefly_tools::output_set& set, const frame_files& f, const image& comb, bool alpha) {
     if (f.out_variance.empty()) return write_exr_to(set, f.out, comb);
     if (alpha) return "-o " + f.out + ": a PFM holds no alpha; name the output .exr, or give --no-alpha";
+    const firefly_tools::window& d = comb.data_window;
+    const firefly_tools::window& s = comb.display_window;
+    const bool placed = d.min_x != 0 || d.min_y != 0 || d.min_x != s.min_x || d.min_y != s.min_y ||
+                        d.max_x != s.max_x || d.max_y != s.max_y;
+    if (placed && !d.empty() && !s.empty())
+        return "-o " + f.out + ": a PFM holds no data or display window, and this frame's data window is not its "
+               "display window at the origin; name the output .exr";
     std::string e = write_pfm_to(set, f.out, comb, 0, 3);
     return e.empty() ? write_pfm_to(set, f.out_variance, comb, 3, comb.channels.size() - 3) : e;
 }

@@ -354,6 +354,9 @@ foreach(origin "5;1000000000" "-20;-7")
     endif()
   endforeach()
 endforeach()
+# a PFM holds no window: a frame placed elsewhere is refused for a PFM output, not moved
+expect_fail(pfm_window "no data or display window" ${WORK}/win.pfm ${WORK}/win_a.exr ${WORK}/win_b.exr
+            -o ${WORK}/win.pfm)
 
 # --- 11: a failing secondary output leaves no main output; the report says what happened ----
 expect_fail(halves_fail "" ${O} ${A} ${B} -o ${O} --halves ${WORK}/nodir/h)

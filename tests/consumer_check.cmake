@@ -33,11 +33,14 @@ if(MODE STREQUAL "find_package")
   foreach(v 99 0.0.5)  # 0.1.0 is neither 99.x nor, before 1.0, 0.0.x
     execute_process(COMMAND ${CMAKE_COMMAND} -S "${CONSUMER}" -B "${WORK}/consumer-v${v}" -G "${GENERATOR}"
         -DCONSUMER_MODE=find_package -DCONSUMER_VERSION=${v} -DCMAKE_PREFIX_PATH=${WORK}/prefix
-        RESULT_VARIABLE rc OUTPUT_QUIET ERROR_QUIET)
-    if(rc EQUAL 0)
-      message(FATAL_ERROR "find_package(firefly ${v}) succeeded against version 0.1")
+        RESULT_VARIABLE rc OUTPUT_QUIET ERROR_VARIABLE err)
+    if(rc EQUAL 0 OR NOT err MATCHES "considered but not accepted")  # refused for its version, not another error
+      message(FATAL_ERROR "find_package(firefly ${v}) not refused for its version (${rc}):\n${err}")
     endif()
   endforeach()
+  # The README's call, find_package(firefly 0.1), takes it.
+  run(${CMAKE_COMMAND} -S "${CONSUMER}" -B "${WORK}/consumer-v0.1" -G "${GENERATOR}"
+      -DCMAKE_CXX_COMPILER=${CXX} -DCONSUMER_MODE=find_package -DCONSUMER_VERSION=0.1 -DCMAKE_PREFIX_PATH=${WORK}/prefix)
   # The target carries the threads std::thread needs (-pthread on glibc before 2.34).
   file(READ "${WORK}/prefix/share/cmake/firefly/fireflyTargets.cmake" targets)
   if(NOT targets MATCHES "Threads::Threads")
@@ -84,7 +87,7 @@ elseif(MODE STREQUAL "header_drop")
   # An older standard is refused first with what is needed, not with an error deep in a header.
   execute_process(COMMAND ${CXX} -std=c++14 -fsyntax-only -I "${WORK}/vendor" "${CONSUMER}/main.cpp"
                   RESULT_VARIABLE rc ERROR_VARIABLE err)
-  string(FIND "${err}" "error" first_error)
+  string(FIND "${err}" "error:" first_error)
   string(FIND "${err}" "firefly needs C++17" needs)
   math(EXPR gap "${needs} - ${first_error}")
   if(rc EQUAL 0 OR needs EQUAL -1 OR gap LESS 0 OR gap GREATER 40)

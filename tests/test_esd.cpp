@@ -339,6 +339,7 @@ TEST_CASE("an alpha whose alpha / n would underflow is refused", "[esd][errors]"
     o.alpha = min_alpha;
     const esd_result r = generalized_esd(v.data(), v.size(), o);
     CHECK(r.error.ok());
+    CHECK(r.lambda.size() == 3);
     for (double l : r.lambda) CHECK(std::isfinite(l));
 }
 

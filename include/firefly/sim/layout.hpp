@@ -176,16 +176,20 @@ private:
 
     void place_spots() {
         spots_.assign(static_cast<std::size_t>(w_) * static_cast<std::size_t>(h_), 0);
+        std::int64_t unmarked = 0;  // pixels a spot could still mark (on the geometry)
+        for (int y = 0; y < h_; ++y)
+            for (int x = 0; x < w_; ++x) unmarked += coverage(x, y) >= 1.0;
         auto mark = [&](int x, int y, effect e) {
-            if (x >= 0 && y >= 0 && x < w_ && y < h_ && coverage(x, y) >= 1.0)
-                spots_[static_cast<std::size_t>(y) * static_cast<std::size_t>(w_) + static_cast<std::size_t>(x)] |=
-                    static_cast<std::uint8_t>(e);
+            if (x < 0 || y < 0 || x >= w_ || y >= h_ || coverage(x, y) < 1.0) return;
+            std::uint8_t& s = spots_[static_cast<std::size_t>(y) * static_cast<std::size_t>(w_) + static_cast<std::size_t>(x)];
+            if (e == highlights && !(s & highlights)) --unmarked;
+            s |= static_cast<std::uint8_t>(e);
         };
         if (fx_ & highlights) {
             counter_rng r(sc_.seed, stream_of(highlights), 0, 0);
-            // Spots beyond one per pixel mark nothing new (and INT_MAX of them would take minutes).
-            const std::int64_t count = (std::min<std::int64_t>)(sc_.highlight_count, std::int64_t{w_} * h_);
-            for (std::int64_t k = 0; k < count; ++k) {
+            // Once every pixel is marked the rest of the spots change nothing: stop there (INT_MAX
+            // spots took a minute on a 1x1 frame).
+            for (int k = 0; k < sc_.highlight_count && unmarked > 0; ++k) {
                 const int x0 = static_cast<int>(r.uniform() * w_), y0 = static_cast<int>(r.uniform() * h_);
                 const int rad = r.uniform() < 0.5 ? 0 : 1;
                 for (int y = y0 - rad; y <= y0 + rad; ++y)

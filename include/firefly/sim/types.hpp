@@ -51,7 +51,7 @@ struct scene {
     bool firefly_relative = false;       // energies are multiples of the pixel's own radiance, as
                                          // added to the mean of `spp` samples (a firefly of 5
                                          // makes a pixel of 1 read 6)
-    int highlight_count = 60;            // small highlight spots (at most one per pixel)
+    int highlight_count = 60;            // small highlight spots
     double highlight_radiance = 25.0;    // x base
     double highlight_noise = 2.5;        // per-sample relative sd inside a highlight
     double wide_radius = 0.08;           // wide highlight radius, share of min(width, height)
