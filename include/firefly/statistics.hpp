@@ -172,18 +172,28 @@ inline double scaled_sum(double p, double q, double w) noexcept {
     return std::isfinite(s) || !std::isfinite(p) || !std::isfinite(q) ? w * s : w * p + w * q;
 }
 
-// Sum of f(i) for i in [0, n) in fixed blocks.
-template <class F>
-double blocked_sum(std::size_t n, F&& f) {
-    double total = 0.0;
+// Sum of f(i) for i in [0, n) in fixed blocks, in a Sum (double, or a few sums together).
+template <class Sum = double, class F>
+Sum blocked_sum(std::size_t n, F&& f) {
+    Sum total{};
     for (std::size_t b = 0; b < n; b += block_size) {
         const std::size_t e = (std::min)(n, b + block_size);
-        double s = 0.0;
+        Sum s{};
         for (std::size_t i = b; i < e; ++i) s += f(i);
         total += s;
     }
     return total;
 }
+
+// The second pass of summary_of: squared deviations and their plain sum, summed together.
+struct deviation_sums {
+    double squares = 0.0, plain = 0.0;
+    deviation_sums& operator+=(const deviation_sums& o) noexcept {
+        squares += o.squares;
+        plain += o.plain;
+        return *this;
+    }
+};
 
 }  // namespace detail
 
@@ -203,19 +213,12 @@ summary summary_of(std::size_t n, Value&& value, Keep&& keep) {
     // Squared deviations and their plain sum c, which corrects the mean's rounding (the
     // "corrected two-pass"), both in blocks: c summed in one run drifted with the order of the
     // values (R_i of the ESD off by 7e-12 over a million values in heap order).
-    double m2 = 0.0, c = 0.0;
-    for (std::size_t b = 0; b < n; b += detail::block_size) {
-        const std::size_t e = (std::min)(n, b + detail::block_size);
-        double sq = 0.0, dev = 0.0;
-        for (std::size_t i = b; i < e; ++i) {
-            if (!keep(i)) continue;
-            const double d = static_cast<double>(value(i)) - mean0;
-            dev += d;
-            sq += d * d;
-        }
-        m2 += sq;
-        c += dev;
-    }
+    const detail::deviation_sums dev = detail::blocked_sum<detail::deviation_sums>(n, [&](std::size_t i) {
+        if (!keep(i)) return detail::deviation_sums{};
+        const double d = static_cast<double>(value(i)) - mean0;
+        return detail::deviation_sums{d * d, d};
+    });
+    const double m2 = dev.squares, c = dev.plain;
     s.mean = mean0 + c / static_cast<double>(count);
     s.m2 = (std::max)(0.0, m2 - c * c / static_cast<double>(count));
     return s;
