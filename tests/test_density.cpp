@@ -382,3 +382,52 @@ TEST_CASE("density return, K buffers: options", "[density][buffers][options]") {
         CHECK(in == std::vector<std::vector<float>>(4, c));  // nothing written
     }
 }
+
+// The light given is the light withheld from the wider scales: sum_p s(p) M_h(p) = sum_q f(q)
+// e_h(q), counting only pixels that can take light. Before, s was set where a pixel could not
+// take it too (background, a non-finite pixel) and f counted it: that light was lost.
+TEST_CASE("density return: the light given is the share withheld, where pixels cannot take it too", "[density][energy]") {
+    const int w = 64, h = 48;
+    std::mt19937 rng(5);
+    auto uniform = [&] { return static_cast<double>(rng() >> 8) * (1.0 / 16777216.0); };
+    std::vector<float> e[2];  // removed excess per half, 3 channels
+    for (auto& v : e) v.assign(static_cast<std::size_t>(w * h * 3), 0.0f);
+    density_scratch s;
+    density_return d;
+    d.prepare(w, h, s);
+    for (int y = 8; y < 40; ++y)
+        for (int x = 8; x < 56; ++x)
+            for (int k = 0; k < 2; ++k)
+                if (uniform() < 0.4) {
+                    const std::size_t p = static_cast<std::size_t>(y * w + x);
+                    for (std::size_t c = 0; c < 3; ++c) e[k][p * 3 + c] = static_cast<float>(2.0 + uniform());
+                    s.removed[p] = 1;
+                }
+    auto load = [&](int x, int y, double* v) {
+        const std::size_t p = static_cast<std::size_t>(y * w + x);
+        v[6] = 0;
+        v[7] = 0.3;  // a dim cleaned level
+        for (std::size_t c = 0; c < 3; ++c) {
+            v[c] = e[0][p * 3 + c];
+            v[3 + c] = e[1][p * 3 + c];
+            v[6] += (v[c] + v[3 + c]) * (v[c] + v[3 + c]);
+        }
+    };
+    auto receives = [&](int x, int y) { return x < 30 || y % 3 != 0; };  // a region and stripes cannot
+    REQUIRE(d.needed(8.0, s));
+    std::vector<density_return::light> out;
+    REQUIRE(d.run(8.0, s, out, executor{}, load, receives));
+    double given[2] = {0, 0}, withheld[2] = {0, 0}, lost = 0;
+    for (const density_return::light& l : out)
+        for (int k = 0; k < 2; ++k)
+            for (int c = 0; c < 3; ++c) {
+                const int x = detail::column_of(l.pixel, w), y = detail::row_of(l.pixel, w);
+                (receives(x, y) ? given[k] : lost) += l.add[k][c];
+            }
+    for (std::size_t q = 0; q < static_cast<std::size_t>(w * h); ++q)
+        for (int k = 0; k < 2; ++k)
+            for (std::size_t c = 0; c < 3; ++c) withheld[k] += d.taken(q) * e[k][q * 3 + c];
+    REQUIRE(withheld[0] > 100.0);
+    CHECK(lost == 0.0);
+    for (int k = 0; k < 2; ++k) CHECK(given[k] == Approx(withheld[k]).epsilon(1e-5));
+}

@@ -621,7 +621,7 @@ TEST_CASE("energy return on an image: the dense model's bits from the list, in a
     std::vector<float> color(np * 3);
     for (float& v : color) v = u(rng);
     // the rebuilt pixels (ascending): what they held before, some channels below the cleaned
-    // value (no excess there), one pixel with none at all, one NaN
+    // value (no excess there), one pixel with none at all (nothing back), one NaN
     std::vector<std::uint32_t> list;
     std::vector<float> before;
     for (std::uint32_t p = 3; p < np; p += static_cast<std::uint32_t>(1 + rng() % 23)) {
@@ -653,11 +653,13 @@ TEST_CASE("energy return on an image: the dense model's bits from the list, in a
     energy_return(excess, once, w, h, sigma, returned, dense, executor{});
     std::vector<float> expect = color;
     std::vector<std::uint8_t> listed(np, 0);
-    for (const std::uint32_t p : list) listed[p] = 1;
+    for (std::size_t e = 0; e < list.size(); ++e)  // 2: what it held before is finite
+        listed[list[e]] = std::isfinite(before[e * 3]) && std::isfinite(before[e * 3 + 1]) && std::isfinite(before[e * 3 + 2]) ? 2 : 1;
     for (std::size_t i = 0; i < np * 3; ++i) {
-        // a rebuilt pixel (with some excess) gets at most its own excess back
+        // a rebuilt pixel gets at most its own excess back: with some excess, or none from a
+        // finite input (its rebuild took nothing: nothing back); not one that held a NaN
         const std::size_t p = i / 3;
-        const bool capped = listed[p] && excess[p * 3] + excess[p * 3 + 1] + excess[p * 3 + 2] > 0;
+        const bool capped = (listed[p] && excess[p * 3] + excess[p * 3 + 1] + excess[p * 3 + 2] > 0) || listed[p] == 2;
         const double add = capped ? std::min(returned[i], excess[i]) : returned[i];
         if (add > 0) expect[i] = static_cast<float>(static_cast<double>(color[i]) + add);
     }
@@ -718,5 +720,81 @@ TEST_CASE("energy return on an image: the dense model's bits from the list, in a
         (void)return_energy_to_image(*make_image_view(again.data(), w, h, 3), list.data(), before.data(), list.size(),
                                      keep.data(), sigma, s2, executor{}, nullptr, bad);
         CHECK(again == expect);
+    }
+}
+
+// A rebuilt pixel gets back at most what its rebuild took: nothing where the rebuild took
+// nothing (it raised every channel). Before, such a pixel had no cap at all and took the whole
+// return (here 1.0 -> 1.5), while one that gave 1e-6 in one channel got ~0.
+TEST_CASE("energy return: a rebuilt pixel whose rebuild took nothing gets nothing back", "[energy]") {
+    const int w = 64, h = 64;
+    std::vector<float> img(static_cast<std::size_t>(w * h * 3), 1.0f);
+    std::vector<std::uint32_t> rebuilt;
+    std::vector<float> before;
+    const std::uint32_t took_nothing = 33 * w + 31, took_little = 33 * w + 33;
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const std::uint32_t p = static_cast<std::uint32_t>(y * w + x);
+            float b[3] = {3.0f, 3.0f, 3.0f};  // dense fireflies of 3 rebuilt to 1
+            if (p == took_nothing) b[0] = b[1] = b[2] = 1.0f;
+            else if (p == took_little) b[0] = 1.000001f, b[1] = b[2] = 1.0f;
+            else if (x % 2 || y % 2) continue;
+            rebuilt.push_back(p);
+            before.insert(before.end(), b, b + 3);
+        }
+    const std::vector<std::uint8_t> keep(static_cast<std::size_t>(w * h), 1);
+    energy_scratch s;
+    const energy_totals t = return_energy_to_image(*make_image_view(img.data(), w, h, 3), rebuilt.data(), before.data(),
+                                                   rebuilt.size(), keep.data(), energy_scales(8.0, 32.0), s, executor{});
+    REQUIRE(t.returned > 0.5 * t.removed);  // the others get light back
+    CHECK(img[took_nothing * 3] == 1.0f);
+    CHECK(img[took_nothing * 3 + 1] == 1.0f);
+    CHECK(img[took_nothing * 3 + 2] == 1.0f);
+    CHECK(img[took_little * 3] <= 1.000001f);
+    CHECK(img[took_little * 3 + 1] == 1.0f);
+    CHECK(img[(33 * w + 35) * 3] > 1.1f);  // an unlisted pixel beside them does
+}
+
+// Pixels without geometry (alpha 0) hold anything under straight alpha; no rebuild and no
+// return may read them. Before, a covered pixel next to colour 1e30 under alpha 0 came out
+// ~1e30 (the spatial rebuild read it), and the return's shape read the colour too (15,000 of
+// the covered values moved).
+TEST_CASE("the colour under alpha 0 changes no covered pixel", "[energy][pipeline][alpha]") {
+    const sim::frame base = sim::simulate(sim::named_scene("dense10", 96, 64, 4));
+    const int w = base.width, h = base.height;
+    std::vector<float> alpha(static_cast<std::size_t>(w * h), 1.0f);
+    for (int y = 0; y < h; ++y)
+        for (int x = 48; x < w; ++x) alpha[static_cast<std::size_t>(y * w + x)] = 0.0f;
+    for (const bool ret : {false, true}) {
+        detector_options o;
+        o.return_energy = ret;
+        std::vector<float> out[3][2];
+        const float garbage[3] = {0.0f, 100.0f, 1e30f};
+        for (int g = 0; g < 3; ++g) {
+            sim::frame f = base;
+            f.alpha = alpha;
+            for (int k = 0; k < 2; ++k)
+                for (int y = 0; y < h; ++y)
+                    for (int x = 48; x < w; ++x)
+                        for (std::size_t c = 0; c < 3; ++c) f.color[k][static_cast<std::size_t>(y * w + x) * 3 + c] = garbage[g];
+            firefly_test::frame_views v(std::move(f));
+            detector d(o);
+            const frame_report r = v.process(d);
+            REQUIRE(r.error.ok());
+            REQUIRE(r.half[0].fireflies > 50);
+            for (int k = 0; k < 2; ++k) out[g][k] = v.f.color[k];
+        }
+        INFO("return_energy " << ret);
+        for (int g = 1; g < 3; ++g)
+            for (int k = 0; k < 2; ++k) {
+                std::size_t differ = 0;
+                for (int y = 0; y < h; ++y)
+                    for (int x = 0; x < 48; ++x)
+                        for (std::size_t c = 0; c < 3; ++c) {
+                            const std::size_t i = static_cast<std::size_t>(y * w + x) * 3 + c;
+                            differ += std::memcmp(&out[g][k][i], &out[0][k][i], sizeof(float)) != 0;
+                        }
+                CHECK(differ == 0);
+            }
     }
 }

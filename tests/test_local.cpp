@@ -811,3 +811,33 @@ TEST_CASE("local test: levels and relative variances match local_pixel bit for b
         }
     }
 }
+
+// The spatial test's screen (Paulson's z at m = 1 / r_other) rules a pixel out only where it
+// bounds the exact test. Where the other half is very noisy (r_other >= 4.5) its z has a
+// ceiling below z_q: before, a firefly of 1e7 over neighbours at 1 went unflagged where the
+// exact test gives p = 2e-7 (flagged from 1e4 to 3e5, then not from 1e6 to 1e9).
+TEST_CASE("local test: a very noisy other half does not hide a bright firefly from the spatial test", "[local]") {
+    for (const double f : {1e6, 1e7, 1e8, 1e9}) {
+        const int w = 5, h = 5;
+        std::vector<float> c[2], v[2];
+        for (int k = 0; k < 2; ++k) {
+            c[k].assign(static_cast<std::size_t>(w * h * 3), 1.0f);
+            v[k].assign(c[k].size(), 0.01f);
+        }
+        for (std::size_t ch = 0; ch < 3; ++ch) {
+            c[0][12 * 3 + ch] = static_cast<float>(f);
+            v[0][12 * 3 + ch] = static_cast<float>(f * f * 0.01);
+            v[1][12 * 3 + ch] = 20.0f;  // the other half: level 1, relative variance 20
+        }
+        local_half<float> a, b;
+        a.color = *make_image_view(c[0].data(), w, h, 3);
+        a.variance = *make_image_view(v[0].data(), w, h, 3);
+        b.color = *make_image_view(c[1].data(), w, h, 3);
+        b.variance = *make_image_view(v[1].data(), w, h, 3);
+        local_test_scratch s;
+        local_test_result r;
+        REQUIRE(local_test(a, b, local_test_options{}, s, r).ok());
+        INFO("firefly " << f);
+        CHECK(std::find(r.half[0].index.begin(), r.half[0].index.end(), 12u) != r.half[0].index.end());
+    }
+}

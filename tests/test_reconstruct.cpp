@@ -311,3 +311,35 @@ TEST_CASE("standard deviation: every layout gives the same bits", "[stddev][inva
             for (std::size_t i = 0; i < n; ++i) CHECK(!(sd1[i] > FLT_MAX));  // no overflow to Inf
         }
 }
+
+// An outside pixel (no geometry) is never read, not even when nothing else reaches a pixel,
+// as an excluded one is then.
+TEST_CASE("reconstruct: outside pixels are never read", "[reconstruct][alpha]") {
+    img im(5, 5, 1);
+    for (auto& v : im.px) v = 1e30f;  // outside: anything
+    im.at(0, 0, 0) = 2.0f;            // the one source
+    im.at(2, 2, 0) = 50.0f;           // to rebuild: reaches the source through the kernel
+    std::vector<std::uint8_t> role_of(25, 2);  // 0 source, 1 rebuild, 2 outside
+    role_of[0] = 0;
+    role_of[12] = 1;
+    auto role = [](std::uint8_t m) { return m == 1 ? pixel_role::rebuild : m == 2 ? pixel_role::outside : pixel_role::source; };
+    reconstruct_scratch s;
+    reconstruct_report r = reconstruct(im.view(), image_view<float>(), role_of.data(), {}, s, 0xFF, role);
+    REQUIRE(r.error.ok());
+    CHECK(im.at(2, 2, 0) == 2.0f);
+    // A pixel whose neighbourhood is outside alone is left as it was and reported; an excluded
+    // neighbourhood would have been read after all.
+    img lone(3, 3, 1);
+    for (auto& v : lone.px) v = 1e30f;
+    lone.at(1, 1, 0) = 9.0f;
+    std::vector<std::uint8_t> m(9, 2);
+    m[4] = 1;
+    r = reconstruct(lone.view(), image_view<float>(), m.data(), {}, s, 0xFF, role);
+    CHECK(r.error.code() == errc::no_valid_pixels);
+    CHECK(r.unreachable == 1);
+    CHECK(lone.at(1, 1, 0) == 9.0f);
+    auto excluded = [](std::uint8_t v) { return v == 1 ? pixel_role::rebuild : pixel_role::excluded; };
+    r = reconstruct(lone.view(), image_view<float>(), m.data(), {}, s, 0xFF, excluded);
+    CHECK(r.error.ok());
+    CHECK(lone.at(1, 1, 0) == 1e30f);
+}

@@ -520,6 +520,8 @@ private:
         }
         if (b[0].color.pixel_count() >= (std::size_t{1} << 32))
             return status{errc::size_overflow, "more than 2^32 pixels"};
+        if (b[0].color.width() > detail::max_side || b[0].color.height() > detail::max_side)
+            return status{errc::size_overflow, "a side longer than 2^30 pixels"};
         return check_apart(b, k, masks, has_var);
     }
 
@@ -1158,7 +1160,8 @@ private:
                 v[7] += positive_mean(b, k, x, y, c);
             }
         };
-        if (!d.run(options_.energy_density_evidence, density_, density_light_, exec_, load)) return 0.0;
+        auto receives = [&](int x, int y) { return !untested_[index(x, y, w)]; };  // as below
+        if (!d.run(options_.energy_density_evidence, density_, density_light_, exec_, load, receives)) return 0.0;
         double given = 0;
         for (const density_return::light& l : density_light_) {
             const int x = detail::column_of(l.pixel, w), y = detail::row_of(l.pixel, w);

@@ -21,7 +21,10 @@
 // the wider scales cannot give back (their ratio is capped at 1); below it they do, with less
 // noise (with the first factor alone, dense10 after NL-means 0.00046 -> 0.0031). The part of
 // each removed sample the density took, f(q) = sum_p w_pq s(p), is withheld from the wider
-// scales, which return the rest (1 - f) e: the total given back is the total removed.
+// scales, which return the rest (1 - f) e. s is 0 where no light can land (an ignored or
+// non-finite pixel: f counted light there that was never given); a kept outlier's share is
+// withheld as given though it gets none, and a rebuilt pixel gets at most f e (below): but
+// for those two, the total given back is the total removed.
 // Measured (relMSE before a denoiser, then after NL-means): dense30 0.251 -> 0.076 and 0.109 ->
 // 0.0070, recall 0.984 -> 0.991; dense10 0.0297 -> 0.0235; the simulated caustics 0.0275 ->
 // 0.0314 but after NL-means 0.0664 -> 0.0465 (its cores are lit by fireflies, whose density is
@@ -37,8 +40,10 @@
 // light where fireflies fall densely; buffers.hpp, give_density_back, says what it measured).
 //
 // A pixel gets no density light where either half kept an outlier (a highlight, or one within
-// its noise: it holds its light already), where it is ignored (black, alpha 0), and a rebuilt
-// pixel at most f e of what its rebuild took (the wider scales' cap takes the rest).
+// its noise: it holds its light already, and the wider scales must not give its share a second
+// time: the simulated caustics 0.0310 -> 0.0313 when they did), where it is ignored (black,
+// alpha 0, whose colour is no part of the level L either) or not finite (s = 0: the wider
+// scales return that light), and a rebuilt pixel at most f e of what its rebuild took.
 //
 // Sums: the Gaussian is separable, and its sums are taken both ways, along rows then columns
 // and along columns then rows, and averaged: a transpose swaps the two orders, and each axis'
@@ -261,8 +266,11 @@ public:
 
     // The pixels that get light, row-major, in `out` (after needed() returned true for this
     // frame), and the share each removed pixel's excess gave (taken()); false when none.
-    template <class Load>
-    bool run(double evidence, density_scratch& s, std::vector<light>& out, const executor& exec, const Load& load) {
+    // receives(x, y): whether the pixel can take light; s is 0 where it cannot, so that the
+    // shares count only light that is given.
+    template <class Load, class Receives>
+    bool run(double evidence, density_scratch& s, std::vector<light>& out, const executor& exec, const Load& load,
+             const Receives& receives) {
         s_ = &s;
         out.clear();
         s.share.clear();  // taken() is 0 until the shares are summed
@@ -271,7 +279,7 @@ public:
             return false;  // needed() has not counted this frame
         s.factor.assign(n, 0.0f);
         std::vector<std::vector<light>> bands(static_cast<std::size_t>((h_ + tile_h - 1) / tile_h));
-        exec.run(bands.size(), [&](std::size_t b) { factor_band(static_cast<int>(b), evidence, load, bands[b]); });
+        exec.run(bands.size(), [&](std::size_t b) { factor_band(static_cast<int>(b), evidence, load, receives, bands[b]); });
         for (const auto& b : bands) out.insert(out.end(), b.begin(), b.end());
         if (out.empty()) return false;
         s.share.assign(n, 0.0f);
@@ -325,15 +333,16 @@ private:
 
     // s at every pixel of band b whose window can pass, and the two halves' light where s > 0,
     // appended to out in row-major order.
-    template <class Load>
-    void factor_band(int b, double evidence, const Load& load, std::vector<light>& out) {
+    template <class Load, class Receives>
+    void factor_band(int b, double evidence, const Load& load, const Receives& receives, std::vector<light>& out) {
         detail::density_sums<8> sums;
         const double* g[8] = {weights_.g, weights_.g, weights_.g, weights_.g, weights_.g, weights_.g, weights_.g2, weights_.g};
         const int y0 = b * tile_h, th = (std::min)(tile_h, h_ - y0);
         for (int x0 = 0; x0 < w_; x0 += tile_w) {
             const int tw = (std::min)(tile_w, w_ - x0);
             if (!(box_count(x0, y0, x0 + tw, y0 + th) > evidence)) continue;  // no window in it passes
-            sums.each(w_, h_, x0, y0, tw, th, g, load, [&](int x, int y) { return window_count(x, y) > evidence; },
+            sums.each(w_, h_, x0, y0, tw, th, g, load,
+                      [&](int x, int y) { return window_count(x, y) > evidence && receives(x, y); },
                       [&](int x, int y, const double* m) { pixel(x, y, evidence, m, out); });
         }
         std::sort(out.begin(), out.end(), [](const light& a, const light& c) { return a.pixel < c.pixel; });

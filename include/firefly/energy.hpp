@@ -467,6 +467,7 @@ struct energy_scratch {
     std::vector<double> factor;         // the nodes: the return's share of the profile, 3
     detail::node_axis ax, ay;           // where the nodes are
     std::vector<std::uint32_t> order;   // return_energy_to_image: its list in pixel order
+    std::vector<std::uint32_t> untaken; // ... and its pixels whose rebuild took nothing (ascending)
     std::vector<double> row_returned;   // each row's light added back (summed in row order)
     std::vector<double> cells, coarse;  // the coarse scale: cell sums, their Gaussian (empty: off)
     detail::cell_axis cx, cy;           // where the cells are
@@ -475,7 +476,7 @@ struct energy_scratch {
     std::size_t bytes() const noexcept {
         return profile.capacity() * sizeof(float) + where.bytes() +
                (xy.capacity() + factor.capacity() + cells.capacity() + coarse.capacity()) * sizeof(double) +
-               row_returned.capacity() * sizeof(double) + order.capacity() * sizeof(std::uint32_t);
+               row_returned.capacity() * sizeof(double) + (order.capacity() + untaken.capacity()) * sizeof(std::uint32_t);
     }
 };
 
@@ -1243,10 +1244,13 @@ inline bool rebuilt_excess(const image_view<C>& color, int x, int y, const float
 // less the cleaned value, where that is finite and positive (else +0), as a float (what a
 // frame-sized float image of it would hold; at most FLT_MAX), straight from the list: nothing
 // frame-sized. The list is taken in pixel order (sorted through `order` when it is not; of a
-// pixel listed twice the last entry counts); entries outside the image are skipped.
+// pixel listed twice the last entry counts); entries outside the image are skipped. untaken:
+// the pixels, ascending, whose rebuild took nothing from a finite input (it raised every
+// channel): no excess to map, and nothing to give back to them.
 template <class C>
 inline void map_rebuilt_excess(const image_view<C>& color, const std::uint32_t* rebuilt, const float* before,
-                               std::size_t n, excess_map& m, std::vector<std::uint32_t>& order) {
+                               std::size_t n, excess_map& m, std::vector<std::uint32_t>& order,
+                               std::vector<std::uint32_t>& untaken) {
     const int w = color.width(), h = color.height();
     const std::size_t np = color.pixel_count();
     const bool sorted = std::is_sorted(rebuilt, rebuilt + n);  // as the detector's lists are
@@ -1259,13 +1263,18 @@ inline void map_rebuilt_excess(const image_view<C>& color, const std::uint32_t* 
     auto entry = [&](std::size_t j) { return sorted ? j : static_cast<std::size_t>(order[j]); };
     m.start.assign(static_cast<std::size_t>(h) + 1, 0);
     m.pixels.clear();
+    untaken.clear();
     for (std::size_t j = 0; j < n; ++j) {
         const std::size_t e = entry(j);
         const std::uint32_t p = rebuilt[e];
         if (p >= np || (j + 1 < n && rebuilt[entry(j + 1)] == p)) continue;
         const int x = detail::column_of(p, w), y = detail::row_of(p, w);
         float f[3];
-        if (!rebuilt_excess(color, x, y, &before[e * 3], f)) continue;  // as map_excess: no record
+        if (!rebuilt_excess(color, x, y, &before[e * 3], f)) {  // as map_excess: no record
+            const float* b = &before[e * 3];
+            if (std::isfinite(b[0]) && std::isfinite(b[1]) && std::isfinite(b[2])) untaken.push_back(p);
+            continue;
+        }
         m.pixels.push_back(excess_at(x, f));
         ++m.start[static_cast<std::size_t>(y) + 1];
     }
@@ -1297,22 +1306,27 @@ struct held_light {
 // pixel's noise still removes a bias that a denoiser, which averages the noise away, cannot.
 // added (when not null, one per pixel): set to 1 where light was added, else left as it was.
 // held: pixels that hold some of the rare light already get only the rest of their share.
+// outside (when not null, one per pixel): pixels that are no part of the image (black
+// background, alpha 0), whose colour, whatever it holds, the shape reads as 0.
 template <class C>
 energy_totals return_energy_to_image(const image_view<C>& color, const std::uint32_t* rebuilt, const float* before,
                                      std::size_t n, const std::uint8_t* keep, energy_scales sigma, energy_scratch& s,
-                                     const executor& exec, std::uint8_t* added = nullptr, held_light held = {}) {
+                                     const executor& exec, std::uint8_t* added = nullptr, held_light held = {},
+                                     const std::uint8_t* outside = nullptr) {
     energy_totals t;
     const int w = color.width(), h = color.height();
     if (color.channels() < 3) return t;
-    detail::map_rebuilt_excess(color, rebuilt, before, n, s.where, s.order);
+    detail::map_rebuilt_excess(color, rebuilt, before, n, s.where, s.order, s.untaken);
     // the shape: the image before the rebuild (the cleaned image plus what was removed), its
     // 3x3 median taken twice (shape_profile)
     auto shape_row = [&](int y, double* row) {
         auto put = [&](int x, int c, double v) {
             row[static_cast<std::size_t>(x) * 3 + static_cast<std::size_t>(c)] = std::isfinite(v) && v > 0 ? v : 0.0;
         };
+        const std::size_t row0 = static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
         for (int x = 0; x < w; ++x)
-            for (int c = 0; c < 3; ++c) put(x, c, color.load(x, y, c));
+            for (int c = 0; c < 3; ++c)
+                put(x, c, outside && outside[row0 + static_cast<std::size_t>(x)] ? 0.0 : color.load(x, y, c));
         for (const detail::excess_pixel* e = s.where.first(y); e != s.where.last(y); ++e)
             for (int c = 0; c < 3; ++c) put(e->x, c, color.load(e->x, y, c) + e->v[c]);
     };
@@ -1334,18 +1348,23 @@ energy_totals return_energy_to_image(const image_view<C>& color, const std::uint
     // rebuilt pixel scaled down to its rebuilt value where the profile is higher (a crowd of
     // fireflies sets the median): recall dense30 0.981 -> 0.987, the simulated caustics 0.905
     // -> 0.910, but relMSE 0.259 -> 0.272 and 0.0275 -> 0.0304: where fireflies crowd, they
-    // are most of the pixel's light.
+    // are most of the pixel's light. A rebuilt pixel whose rebuild took nothing (s.untaken)
+    // gets nothing: its cap is 0.
     detail::for_each_energy_row(s, w, h, exec, [&](int y, const double* row_add) {
         double sum = 0;
         const detail::excess_pixel* e = s.where.first(y);
         const std::size_t row0 = static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
         const std::uint32_t* q = std::lower_bound(held.pixels, held_end, row0);
+        const std::uint32_t* u = std::lower_bound(s.untaken.data(), s.untaken.data() + s.untaken.size(), row0);
+        const std::uint32_t* u_end = s.untaken.data() + s.untaken.size();
         double capped[3], rest[3];
         for (int x = 0; x < w; ++x) {
             const std::size_t p = row0 + static_cast<std::size_t>(x);
             const double* add = &row_add[static_cast<std::size_t>(x) * 3];
             while (e != s.where.last(y) && e->x < x) ++e;
             if (e != s.where.last(y) && e->x == x) add = detail::at_most(add, e->v, capped);
+            while (u != u_end && *u < p) ++u;
+            if (u != u_end && *u == p) continue;
             while (q != held_end && *q < p) ++q;
             if (q != held_end && *q == p) {
                 const std::size_t k = static_cast<std::size_t>(q - held.pixels);

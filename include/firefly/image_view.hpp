@@ -18,6 +18,11 @@ namespace firefly {
 
 inline constexpr std::ptrdiff_t auto_stride = 0;
 
+namespace detail {
+// The detectors' longest side: the energy return's half-pixel positions (2 x + 1) stay in int.
+inline constexpr int max_side = 1 << 30;
+}  // namespace detail
+
 // ---------------------------------------------------------------------------------------
 // Channel traits: how one channel value converts to and from double. Specialise for a user
 // type (a half-float, a fixed-point type, a strong typedef) to use it in views.

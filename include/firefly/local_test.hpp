@@ -188,7 +188,8 @@ struct local_test_scratch {
 
 // One half buffer's views for the test; alpha may be empty. label (optional, pixel_count
 // bytes, row-major): the stddev pass's labels, pixel_class in the low bits; when null the
-// class is computed here (black: every colour channel 0; alpha <= 0; NaN/Inf anywhere).
+// class is computed here (black: every colour channel 0; alpha <= 0; NaN/Inf in alpha or in
+// the first three colour channels or their variances, the channels the test reads).
 // Colour, variance and alpha may each have their own channel type, as in half_buffer.
 template <class C, class V = C, class A = C>
 struct local_half {
@@ -310,13 +311,15 @@ void local_levels_row(const local_half<C, V, A>& h, double scale, int y, const f
             rel_var[x] = std::numeric_limits<float>::quiet_NaN();
         }
     };
+    // (a row's offset in ptrdiff_t: x * channels overflows int past 2^29 RGBA pixels)
+    auto at = [](int x, int channels) { return static_cast<std::ptrdiff_t>(x) * channels; };
     int x = 0;
 #if defined(__SSE2__)
     if constexpr (NC == 3) {
         for (; x + 1 < w; x += 2) {
             bool counts[2];
             if (fc)
-                local_pixel_pair(fc + x * cc, fc + (x + 1) * cc, 1, fv + x * vc, fv + (x + 1) * vc, one_var ? 0 : 1,
+                local_pixel_pair(fc + at(x, cc), fc + at(x + 1, cc), 1, fv + at(x, vc), fv + at(x + 1, vc), one_var ? 0 : 1,
                                  scale, level + x, rel_var + x, counts);
             else
                 local_pixel_pair(col.p + y * col.y + x * col.x, col.p + y * col.y + (x + 1) * col.x, col.c,
@@ -329,7 +332,7 @@ void local_levels_row(const local_half<C, V, A>& h, double scale, int y, const f
 #endif
     for (; x < w; ++x) {
         const bool counts =
-            fc ? local_pixel<NC>(fc + x * cc, 1, fv + x * vc, 1, nc, one_var, scale, level[x], rel_var[x])
+            fc ? local_pixel<NC>(fc + at(x, cc), 1, fv + at(x, vc), 1, nc, one_var, scale, level[x], rel_var[x])
                : local_pixel<NC>(col.p + y * col.y + x * col.x, col.c, var.p + y * var.y + x * var.x, var.c, nc,
                                  one_var, scale, level[x], rel_var[x]);
         finish(x, counts);
@@ -882,9 +885,13 @@ inline double local_score(const local_test_options& o, const local_levels_q& k, 
         std::size_t count = 0;
         const double sum = neighbour_sum(s, w, h, x, y, o.radius, band.window, count);
         const double m_max = 1.0 / r_other, n = static_cast<double>(count);
+        // Paulson's z at m_max bounds the test's only where z rises with c and with m (a1 =
+        // r_other / 9 < 1/2, as spatial_screen_may): past that its z has a ceiling below z_q
+        // (1.9 at n = 6, r_other = 10) while the exact tail passes a firefly of 1e7 at p = 2e-7.
         spatial_may = count >= static_cast<std::size_t>(o.min_neighbours) && sum > 0 && l_hi * n > sum &&
-                      paulson_may_exceed(l_hi * n / sum, 2.0 * m_max, 2.0 * n * m_max, zq - 1.0) &&
-                      paulson_z(l_hi * n / sum, 2.0 * m_max, 2.0 * n * m_max) > zq - 1.0;
+                      (!(r_other * (1.0 / 9.0) < 0.5) ||
+                       (paulson_may_exceed(l_hi * n / sum, 2.0 * m_max, 2.0 * n * m_max, zq - 1.0) &&
+                        paulson_z(l_hi * n / sum, 2.0 * m_max, 2.0 * n * m_max) > zq - 1.0));
         if (spatial_may) mu = neighbour_levels(s, w, h, x, y, o.radius, band.levels);
     }
     if (!pair_may && !spatial_may) return 0.0;

@@ -3,7 +3,8 @@
 // Each marked pixel becomes the Gaussian-weighted mean of its neighbours in a square kernel
 // (5 pixels wide by default), colour and variance alike; the kernel is renormalised over
 // the neighbours that may be read, so borders and corners need no special case. Pixels a
-// role marks `excluded` (outliers that are kept, like highlights) are never read.
+// role marks `excluded` (outliers that are kept, like highlights) are not read, nor are those
+// it marks `outside` (no geometry).
 //
 //   phase 1  gives every marked pixel a first value, in rounds. A round reads only pixels
 //            known when it began (sources, and marked ones set by earlier rounds), so a
@@ -20,8 +21,8 @@
 //
 // A marked pixel that no source can reach (its whole neighbourhood, transitively, is marked
 // or excluded: a firefly inside a kept highlight region) reads the excluded pixels after
-// all; one that nothing can reach keeps its values and is reported (unreachable,
-// no_valid_pixels).
+// all (never the outside ones); one that nothing can reach keeps its values and is reported
+// (unreachable, no_valid_pixels).
 //
 // Exact symmetry: the weighted sums are kernel.hpp's flip-exact trees, so a flipped or
 // transposed input gives a bit-identical (flipped) output.
@@ -75,7 +76,8 @@ inline status check_reconstruct_options(const reconstruct_options& o) noexcept {
 enum class pixel_role : std::uint8_t {
     source = 0,    // read by its neighbours, never changed
     rebuild = 1,   // marked: gets the weighted mean of its readable neighbours
-    excluded = 3,  // neither read nor changed
+    excluded = 3,  // neither read nor changed, but read when nothing else reaches a pixel
+    outside = 4,   // no part of the image (alpha 0): never read, never changed
 };
 
 // Memory reused across calls (and frames).
@@ -88,7 +90,7 @@ public:
 
     // Internal state of reconstruct(); public only so the function template can reach it.
     detail::gaussian_kernel kernel_;
-    // Per pixel: 0 source, 1 marked, 2 marked and known, 3 excluded; | queued when listed
+    // Per pixel: 0 source, 1 marked, 2 marked and known, 3 excluded, 4 outside; | queued when listed
     // for the next round or iteration.
     std::vector<std::uint8_t> state_;
     std::vector<std::uint32_t> list_;   // marked pixels of this round / iteration

@@ -363,7 +363,9 @@ public:
         for (std::size_t b = b1; b <= b2; ++b) count += hist_[b];
         scratch.resize(count + 1);
         std::size_t none = 0;  // [1, 0] is an empty inner interval
-        const float hi_incl = std::nextafter(hi, -HUGE_VALF);  // [lo, hi) as a closed interval
+        // [lo, hi) as a closed interval; +Inf's bucket (0x7f80, counted: it is >= 0) is the
+        // last, whose next edge is a NaN's bits
+        const float hi_incl = b2 >= 0x7f80 ? HUGE_VALF : std::nextafter(hi, -HUGE_VALF);
         scratch.resize(detail::count_and_collect(v, n, 1.0f, 0.0f, lo, hi_incl, scratch.data(), none));
         auto first = scratch.begin() + static_cast<std::ptrdiff_t>(k - below);
         std::nth_element(scratch.begin(), first, scratch.end());
@@ -447,16 +449,22 @@ private:
         return static_cast<double>(f) > x ? std::nextafter(f, -HUGE_VALF) : f;
     }
 
-    // The MAD from its bracket: in float terms |x - med| <= d_lo exactly when x lies in
-    // [in_lo, in_hi] (the bounds rounded inwards), and every deviation in (d_lo, d_hi] has its
+    // The MAD from its bracket: in float terms |x - med| <= d_lo when x lies in [in_lo, in_hi]
+    // (the bounds rounded inwards, then checked in the deviation's own rounding), and every deviation in (d_lo, d_hi] has its
     // x in [out_lo, out_hi] (rounded outwards). One pass counts the first and collects the
     // second; values collected beyond d_hi rank above the answer and do no harm.
     double mad_in_bracket(const float* v, std::size_t n, double med, double d_lo, double d_hi, std::size_t k,
                           std::size_t k2, std::vector<double>& scratch) const {
         const std::vector<std::uint64_t>& prefix = prefix_;
         const bool has_inner = d_lo >= 0;
-        const float in_lo = has_inner ? float_at_or_above(med - d_lo) : 1.0f;
-        const float in_hi = has_inner ? float_at_or_below(med + d_lo) : 0.0f;
+        float in_lo = has_inner ? float_at_or_above(med - d_lo) : 1.0f;
+        float in_hi = has_inner ? float_at_or_below(med + d_lo) : 0.0f;
+        // med +- d_lo is rounded to double before it is rounded to a float: a bound can land one
+        // float outside, whose deviation (as computed below) exceeds d_lo. Step it inwards.
+        while (has_inner && in_lo <= in_hi && !(std::fabs(static_cast<double>(in_lo) - med) <= d_lo))
+            in_lo = std::nextafter(in_lo, HUGE_VALF);
+        while (has_inner && in_lo <= in_hi && !(std::fabs(static_cast<double>(in_hi) - med) <= d_lo))
+            in_hi = std::nextafter(in_hi, -HUGE_VALF);
         const float out_lo = (std::max)(float_at_or_below(med - d_hi), 0.0f), out_hi = float_at_or_above(med + d_hi);
         // The band holds at most the values of the buckets its two intervals touch.
         auto count_buckets = [&](float a, float b) -> std::size_t {

@@ -150,9 +150,16 @@ public:
 
     // The radiance the estimator converges to, per channel.
     // Returns the part that fireflies contribute (the same in every channel).
+    // A firefly sample takes the place of an ordinary one (scene.hpp, simulate_pixel): each
+    // position is a firefly with probability p_ff and a caustic's with p_caustic (at most 1:
+    // p >= 1 hits every position), and the ordinary samples keep the rest of the positions.
+    // Exact unless the two kinds of hits together can outnumber a pixel's samples (both effects
+    // on, few samples, high rates): there the ordinary share is a little above 1 - hit.
     double expected(const pixel_model& p, float out[3]) const noexcept {
-        const double ff = (p.p_ff + p.p_caustic) * p.energy_scale * mean_ratio_;
-        for (int c = 0; c < 3; ++c) out[c] = static_cast<float>(p.cov * (p.sign * p.mu[c] + ff));
+        const double hit = (std::min)(p.p_ff, 1.0) + (std::min)(p.p_caustic, 1.0);
+        const double ff = hit * p.energy_scale * mean_ratio_;
+        const double ordinary = 1.0 - (std::min)(hit, 1.0);
+        for (int c = 0; c < 3; ++c) out[c] = static_cast<float>(p.cov * (p.sign * p.mu[c] * ordinary + ff));
         return p.cov * ff;
     }
 

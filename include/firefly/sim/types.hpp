@@ -50,7 +50,7 @@ struct scene {
     double firefly_energy_max = 0.0;     // ... or, when > firefly_energy, log-uniform between the two
     bool firefly_relative = false;       // energies are multiples of the pixel's own radiance, as
                                          // added to the mean of `spp` samples (a firefly of 5
-                                         // makes a pixel of 1 read 6)
+                                         // takes one sample's place: a pixel of 1 reads 6 - 1/spp)
     int highlight_count = 60;            // small highlight spots
     double highlight_radiance = 25.0;    // x base
     double highlight_noise = 2.5;        // per-sample relative sd inside a highlight
