@@ -518,10 +518,7 @@ private:
             if (masks && (!same_size(masks[i], b[0].color) || masks[i].channels() != 1))
                 return status{errc::size_mismatch, "a mask must be 1 channel, frame-sized"};
         }
-        if (b[0].color.pixel_count() >= (std::size_t{1} << 32))
-            return status{errc::size_overflow, "more than 2^32 pixels"};
-        if (b[0].color.width() > detail::max_side || b[0].color.height() > detail::max_side)
-            return status{errc::size_overflow, "a side longer than 2^30 pixels"};
+        if (status st = detail::check_frame_extent(b[0].color); !st.ok()) return st;
         return check_apart(b, k, masks, has_var);
     }
 
@@ -1160,12 +1157,12 @@ private:
                 v[7] += positive_mean(b, k, x, y, c);
             }
         };
-        auto receives = [&](int x, int y) { return !untested_[index(x, y, w)]; };  // as below
+        // none where a pixel's own fireflies could not be told: none removed there
+        auto receives = [&](int x, int y) { return !untested_[index(x, y, w)]; };
         if (!d.run(options_.energy_density_evidence, density_, density_light_, exec_, load, receives)) return 0.0;
         double given = 0;
         for (const density_return::light& l : density_light_) {
             const int x = detail::column_of(l.pixel, w), y = detail::row_of(l.pixel, w);
-            if (untested_[l.pixel]) continue;  // its own fireflies could not be told: none removed
             const double f = d.taken(l.pixel);  // (0 where nothing was removed)
             double add[3];
             for (int c = 0; c < 3; ++c) {

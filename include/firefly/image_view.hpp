@@ -18,11 +18,6 @@ namespace firefly {
 
 inline constexpr std::ptrdiff_t auto_stride = 0;
 
-namespace detail {
-// The detectors' longest side: the energy return's half-pixel positions (2 x + 1) stay in int.
-inline constexpr int max_side = 1 << 30;
-}  // namespace detail
-
 // ---------------------------------------------------------------------------------------
 // Channel traits: how one channel value converts to and from double. Specialise for a user
 // type (a half-float, a fixed-point type, a strong typedef) to use it in views.
@@ -398,5 +393,19 @@ template <class A, class B>
 constexpr bool same_size(const image_view<A>& a, const image_view<B>& b) noexcept {
     return a.width() == b.width() && a.height() == b.height();
 }
+
+namespace detail {
+// The detectors' longest side: the energy return's half-pixel positions (2 x + 1) stay in int.
+inline constexpr int max_side = 1 << 30;
+
+// A frame both detectors can index: fewer than 2^32 pixels (32-bit pixel lists) and no side
+// past max_side.
+template <class T>
+status check_frame_extent(const image_view<T>& v) noexcept {
+    if (v.pixel_count() >= (std::size_t{1} << 32)) return status{errc::size_overflow, "more than 2^32 pixels"};
+    if (v.width() > max_side || v.height() > max_side) return status{errc::size_overflow, "a side longer than 2^30 pixels"};
+    return ok_status();
+}
+}  // namespace detail
 
 }  // namespace firefly

@@ -789,6 +789,11 @@ inline void window_columns(int w, int y, local_band_scratch& band) {
     }
 }
 
+// Where a screen by Paulson's z at m = 1 / r_other bounds the exact test: z rises with the
+// level ratio and with m while a1 = r_other / 9 < 1/2. Past that its z has a ceiling below z_q
+// (1.9 at n = 6, r_other = 10) while the exact tail passes a firefly of 1e7 at p = 2e-7.
+inline bool paulson_screen_holds(double r_other) noexcept { return r_other * (1.0 / 9.0) < 0.5; }
+
 // Whether the spatial screen in local_score may pass, from a window sum `approx` of the same
 // count usable levels in another order: false only where it surely fails. The levels are
 // positive, so the two sums differ by less than 1e-12 relatively (16 values). Paulson's z at
@@ -802,7 +807,7 @@ inline bool spatial_screen_may(double l_hi, double approx, std::size_t count, do
     if (count < static_cast<std::size_t>(min_neighbours) || !(approx > 0)) return false;
     if (!(l_hi * n > approx * (1.0 - 1e-12))) return false;
     const double z = zq - 1.0 - 1e-4, a1 = r_other * (1.0 / 9.0);
-    if (!(z > 0 && a1 < 0.5)) return true;  // z need not rise with c
+    if (!(z > 0 && paulson_screen_holds(r_other))) return true;  // z need not rise with c
     const double p = l_hi * n * (1.0 + 1e-12) + 2.0 * approx;
     const double m = (n - a1) * p - 3.0 * n * (1.0 - a1) * approx;
     return m > 0 && m * m >= z * z * n * a1 * (p * p + 9.0 * n * approx * approx);
@@ -885,11 +890,8 @@ inline double local_score(const local_test_options& o, const local_levels_q& k, 
         std::size_t count = 0;
         const double sum = neighbour_sum(s, w, h, x, y, o.radius, band.window, count);
         const double m_max = 1.0 / r_other, n = static_cast<double>(count);
-        // Paulson's z at m_max bounds the test's only where z rises with c and with m (a1 =
-        // r_other / 9 < 1/2, as spatial_screen_may): past that its z has a ceiling below z_q
-        // (1.9 at n = 6, r_other = 10) while the exact tail passes a firefly of 1e7 at p = 2e-7.
         spatial_may = count >= static_cast<std::size_t>(o.min_neighbours) && sum > 0 && l_hi * n > sum &&
-                      (!(r_other * (1.0 / 9.0) < 0.5) ||
+                      (!paulson_screen_holds(r_other) ||
                        (paulson_may_exceed(l_hi * n / sum, 2.0 * m_max, 2.0 * n * m_max, zq - 1.0) &&
                         paulson_z(l_hi * n / sum, 2.0 * m_max, 2.0 * n * m_max) > zq - 1.0));
         if (spatial_may) mu = neighbour_levels(s, w, h, x, y, o.radius, band.levels);

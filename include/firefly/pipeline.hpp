@@ -357,6 +357,7 @@ private:
     }
     static std::uint8_t cls(std::uint8_t label) noexcept { return label & pixel_class_bits; }
     static constexpr std::uint8_t valid_class = static_cast<std::uint8_t>(pixel_class::valid);
+    static constexpr std::uint8_t ignored_class = static_cast<std::uint8_t>(pixel_class::ignored);
     static constexpr std::uint8_t nonfinite_class = static_cast<std::uint8_t>(pixel_class::nonfinite);
     static std::size_t index(int x, int y, int w) noexcept {
         return static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
@@ -441,10 +442,7 @@ private:
         if (!same_size(a.color, b.color)) return status{errc::size_mismatch, "the two halves differ in size"};
         if (a.color.channels() != b.color.channels() || a.variance.channels() != b.variance.channels())
             return status{errc::channel_mismatch, "the two halves differ in channels"};
-        if (a.color.pixel_count() >= (std::size_t{1} << 32))
-            return status{errc::size_overflow, "more than 2^32 pixels"};
-        if (a.color.width() > detail::max_side || a.color.height() > detail::max_side)
-            return status{errc::size_overflow, "a side longer than 2^30 pixels"};
+        if (status st = detail::check_frame_extent(a.color); !st.ok()) return st;
         return check_no_aliasing(a, b, mask_a, mask_b);
     }
 
@@ -502,7 +500,7 @@ private:
         auto black_at = [&](int x, int y) -> std::uint64_t {
             const std::size_t i = index(x, y, w);
             for (int k = 0; k < 2; ++k)
-                if (cls(lab[k][i]) == static_cast<std::uint8_t>(pixel_class::ignored) && cls(lab[1 - k][i]) == valid_class &&
+                if (cls(lab[k][i]) == ignored_class && cls(lab[1 - k][i]) == valid_class &&
                     detail::colour_is_black(hb[k]->color, x, y))
                     return std::uint64_t{1} << k;
             return 0;
@@ -1303,7 +1301,7 @@ private:
                     for (int k = 0; k < 2; ++k) {
                         const std::uint32_t e = density_entry_[k][p];
                         v[3 * k + c] = e ? density_excess_[k][(e - 1) * 3 + static_cast<std::size_t>(c)] : 0.0f;
-                        if (cls(halves_[k].label[p]) == static_cast<std::uint8_t>(pixel_class::ignored)) continue;
+                        if (cls(halves_[k].label[p]) == ignored_class) continue;
                         const double c_k = hb[k]->color.load(x, y, c);  // (ignored: no part of the level)
                         l += std::isfinite(c_k) && c_k > 0 ? c_k : 0.0;
                     }
@@ -1351,7 +1349,7 @@ private:
         for (const density_return::light& l : density_light_) {
             const std::uint32_t i = l.pixel;
             while (e < s.fix.size() && s.fix[e] < i) ++e;
-            if (cls(s.label[i]) != valid_class || (s.label[i] & kept) || (o.label[i] & kept)) continue;
+            if ((s.label[i] & kept) || (o.label[i] & kept)) continue;  // (valid in both: receives)
             const auto [x, y] = xy(i);
             double add[3], old[3];
             const bool rebuilt = e < s.fix.size() && s.fix[e] == i;
@@ -1421,7 +1419,7 @@ private:
             // an ignored pixel's colour (alpha 0 may hold anything) is no part of the shape
             s.outside.resize(r.ignored > 0 ? s.label.size() : 0);
             for (std::size_t i = 0; i < s.outside.size(); ++i)
-                s.outside[i] = cls(s.label[i]) == static_cast<std::uint8_t>(pixel_class::ignored);
+                s.outside[i] = cls(s.label[i]) == ignored_class;
             const energy_totals t = return_energy_to_image(hb.color, s.fix.data(),
                                                            s.before.data(), s.fix.size(), s.decision.data(),
                                                            energy_scales(options_.energy_sigma, options_.energy_coarse_sigma), energy_, exec_,
@@ -1510,7 +1508,7 @@ private:
         // Spatially: what is bad in both halves (or everything, with rebuild = spatial).
         // Sources exclude every outlier and non-finite pixel not rebuilt from the other half;
         // a pixel without geometry is never read (no_geometry_bit, set for the rebuild alone).
-        const bool uncovered = mark_no_geometry(hb, s, r, true);
+        const bool uncovered = mark_no_geometry(hb, s, r);
         auto role = [](std::uint8_t m) {
             if (m & fix_bit) return pixel_role::rebuild;
             if (m & other_half_bit) return pixel_role::source;
@@ -1521,7 +1519,8 @@ private:
         constexpr std::uint8_t interesting = fix_bit | other_half_bit | outlier_bit | nonfinite_class | no_geometry_bit;
         const reconstruct_report rr =
             reconstruct(hb.color, hb.variance, label, options_.reconstruction, s.recon, interesting, role);
-        if (uncovered) (void)mark_no_geometry(hb, s, r, false);
+        if (uncovered)
+            for (std::uint8_t& l : s.label) l = static_cast<std::uint8_t>(l & ~no_geometry_bit);
         r.phase1_rounds = rr.phase1_rounds;
         r.phase2_iterations = rr.phase2_iterations;
         r.final_change = rr.final_change;
@@ -1536,19 +1535,15 @@ private:
         r.repaired = repaired;
     }
 
-    // Sets (on) or clears no_geometry_bit on this half's ignored pixels without geometry;
-    // whether there are any to mark (alpha given, some pixel ignored).
+    // Sets no_geometry_bit on this half's ignored pixels without geometry; whether there can
+    // be any (alpha given, some pixel ignored).
     template <class C, class V, class A>
-    static bool mark_no_geometry(const half_buffer<C, V, A>& hb, half_state& s, const half_report& r, bool on) {
+    static bool mark_no_geometry(const half_buffer<C, V, A>& hb, half_state& s, const half_report& r) {
         if (hb.alpha.empty() || r.ignored == 0) return false;
         const int w = hb.color.width();
-        for (std::size_t i = 0; i < s.label.size(); ++i) {
-            if (cls(s.label[i]) != static_cast<std::uint8_t>(pixel_class::ignored)) continue;
-            if (!on)
-                s.label[i] = static_cast<std::uint8_t>(s.label[i] & ~no_geometry_bit);
-            else if (!covered(hb, detail::column_of(i, w), detail::row_of(i, w)))
+        for (std::size_t i = 0; i < s.label.size(); ++i)
+            if (cls(s.label[i]) == ignored_class && !covered(hb, detail::column_of(i, w), detail::row_of(i, w)))
                 s.label[i] = static_cast<std::uint8_t>(s.label[i] | no_geometry_bit);
-        }
         return true;
     }
 

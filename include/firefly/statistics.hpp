@@ -450,8 +450,8 @@ private:
     }
 
     // The MAD from its bracket: in float terms |x - med| <= d_lo when x lies in [in_lo, in_hi]
-    // (the bounds rounded inwards, then checked in the deviation's own rounding), and every deviation in (d_lo, d_hi] has its
-    // x in [out_lo, out_hi] (rounded outwards). One pass counts the first and collects the
+    // (the bounds rounded inwards, then checked in the deviation's own rounding), and every
+    // deviation in (d_lo, d_hi] has its x in [out_lo, out_hi] (rounded outwards). One pass counts the first and collects the
     // second; values collected beyond d_hi rank above the answer and do no harm.
     double mad_in_bracket(const float* v, std::size_t n, double med, double d_lo, double d_hi, std::size_t k,
                           std::size_t k2, std::vector<double>& scratch) const {
