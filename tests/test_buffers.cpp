@@ -11,8 +11,10 @@
 #include <cfloat>
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
+#include <random>
 #include <vector>
 
 #include "catch.hpp"
@@ -1028,4 +1030,131 @@ TEST_CASE("a pixel the screen rules out is flagged by no pooled noise, and the p
     }
     CHECK(screened > 2000);          // the screen decides often
     CHECK(flagged_somewhere > 2000);  // and the step-down flags often: both sides are exercised
+}
+
+TEST_CASE("K buffers: a flagged buffer whose rebuild took nothing gets nothing back", "[buffers][energy]") {
+    // K = 3, at one pixel a = (B, s, 0), b = (B, 0, s), f = (B, s/2, s/2): float rounding makes
+    // a's and b's levels equal and f's one ulp higher, so f alone is flagged, yet f is the clean
+    // mean in every channel: the excess is exactly 0. Before, the cap applied only where some
+    // channel's excess was above 0, and the pixel took +0.866 of the return.
+    const float base = 0x1.ce5f18p+0f, s = 0x1.5e354p-52f;
+    const int w = 48, h = 48, k = 3, tx = 24, ty = 24;
+    std::vector<std::vector<float>> col(k, std::vector<float>(static_cast<std::size_t>(w * h * 3)));
+    for (auto& c : col)
+        for (std::size_t p = 0; p < static_cast<std::size_t>(w * h); ++p) c[p * 3] = base, c[p * 3 + 1] = s, c[p * 3 + 2] = 0;
+    std::uint32_t r = 7;
+    auto next = [&] { return r = r * 1664525u + 1013904223u; };
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {  // fireflies around (a removed excess to return)
+            if (std::abs(x - tx) <= 1 && std::abs(y - ty) <= 1) continue;
+            if (next() % 4 == 0) {
+                const std::size_t b = (next() >> 8) % k;
+                for (std::size_t c = 0; c < 3; ++c) col[b][static_cast<std::size_t>(y * w + x) * 3 + c] += 8.0f;
+            }
+        }
+    const std::size_t t = static_cast<std::size_t>(ty * w + tx) * 3;
+    col[1][t + 1] = 0, col[1][t + 2] = s;
+    col[2][t + 1] = s / 2, col[2][t + 2] = s / 2;
+    const auto before = col;
+    std::vector<std::vector<std::uint8_t>> m(k, std::vector<std::uint8_t>(static_cast<std::size_t>(w * h)));
+    std::vector<buffer_view<float>> v;
+    std::vector<image_view<std::uint8_t>> mv;
+    for (int b = 0; b < k; ++b) {
+        v.push_back({*make_image_view(col[static_cast<std::size_t>(b)].data(), w, h, 3), {}});
+        mv.push_back(*make_image_view(m[static_cast<std::size_t>(b)].data(), w, h));
+    }
+    cross_buffer_detector d;
+    const cross_buffer_report rep = d.process(v, mv);
+    REQUIRE(rep.ok());
+    REQUIRE(rep.energy_returned > 0);
+    REQUIRE((m[2][static_cast<std::size_t>(ty * w + tx)] & mask_bits::firefly) != 0);
+    for (std::size_t c = 0; c < 3; ++c) {
+        double in = 0, out = 0;
+        for (std::size_t b = 0; b < k; ++b) in += before[b][t + c], out += col[b][t + c];
+        INFO("channel " << c);
+        CHECK(out == in);
+    }
+}
+
+TEST_CASE("K buffers: a non-finite variance in any channel is found and rebuilt", "[buffers]") {
+    // RGBA colour and variance: before, only the colour channels' variances were checked, and a
+    // NaN in alpha's stayed (nonfinite 0), where one in red's was repaired.
+    const int w = 8, h = 8, k = 4;
+    for (const int vc : {0, 3}) {
+        std::vector<std::vector<float>> col(k, std::vector<float>(w * h * 4, 0.5f)), var(k, std::vector<float>(w * h * 4, 0.01f));
+        for (auto& c : col)
+            for (std::size_t p = 0; p < static_cast<std::size_t>(w * h); ++p) c[p * 4 + 3] = 1.0f;
+        const std::size_t i = static_cast<std::size_t>(3 * w + 3) * 4 + static_cast<std::size_t>(vc);
+        var[1][i] = std::numeric_limits<float>::quiet_NaN();
+        std::vector<buffer_view<float>> v;
+        for (std::size_t b = 0; b < k; ++b) v.push_back({*make_image_view(col[b].data(), w, h, 4), *make_image_view(var[b].data(), w, h, 4)});
+        cross_buffer_detector d;
+        const cross_buffer_report r = d.process(v);
+        INFO("variance channel " << vc);
+        REQUIRE(r.ok());
+        CHECK(r.nonfinite == 1);
+        CHECK(var[1][i] == 0.01f);
+    }
+}
+
+TEST_CASE("K buffers: the report's energy stays finite for fireflies near DBL_MAX", "[buffers][energy][numerics]") {
+    // 128 pixels with a firefly of 1e308 in one of 4 double buffers: each pixel's excess is held
+    // at DBL_MAX / 64 a buffer and channel, and their sum overflowed to +inf.
+    const int w = 16, h = 16, k = 4;
+    std::vector<std::vector<double>> col(k, std::vector<double>(w * h * 3, 1.0));
+    for (std::size_t p = 0; p < static_cast<std::size_t>(w * h); p += 2)
+        for (std::size_t c = 0; c < 3; ++c) col[p % k][p * 3 + c] = 1e308;
+    std::vector<buffer_view<double>> v;
+    for (auto& c : col) v.push_back({*make_image_view(c.data(), w, h, 3), {}});
+    cross_buffer_options o;
+    o.find_implausible = false;
+    cross_buffer_detector d(o);
+    const cross_buffer_report r = d.process(v);
+    REQUIRE(r.ok());
+    CHECK(r.fireflies == 128);
+    CHECK(std::isfinite(r.energy_removed));
+    CHECK(std::isfinite(r.energy_returned));
+    for (const auto& c : col)
+        for (const double x : c) REQUIRE(std::isfinite(x));
+}
+
+TEST_CASE("K buffers: energy_returned is the light added, with the finest scale on", "[buffers][energy]") {
+    // Red fireflies (60, 0, 0) on grey: their excess is negative in green and blue, where the
+    // density's share was counted as given though nothing was added (0.33% high before).
+    const int w = 64, h = 64, k = 4;
+    std::mt19937 g(3);
+    std::gamma_distribution<double> gamma(16.0, 1.0 / 16);
+    std::vector<std::vector<float>> col(k, std::vector<float>(w * h * 3));
+    for (std::size_t p = 0; p < static_cast<std::size_t>(w * h); ++p)
+        for (auto& c : col) c[p * 3] = c[p * 3 + 1] = c[p * 3 + 2] = static_cast<float>(gamma(g));
+    std::uniform_int_distribution<int> pick(0, k - 1);
+    std::uniform_real_distribution<double> u(0, 1);
+    for (int y = 8; y < h - 8; ++y)
+        for (int x = 8; x < w - 8; ++x)
+            if (u(g) < 0.5) {
+                float* px = &col[static_cast<std::size_t>(pick(g))][static_cast<std::size_t>(y * w + x) * 3];
+                px[0] = 60.0f, px[1] = px[2] = 0.0f;
+            }
+    for (const double evidence : {0.0, 8.0}) {
+        auto with = col, without = col;
+        cross_buffer_options o;
+        o.energy_density_evidence = evidence;
+        cross_buffer_options off = o;
+        off.return_energy = false;
+        std::vector<buffer_view<float>> vw, vo;
+        for (std::size_t b = 0; b < k; ++b) {
+            vw.push_back({*make_image_view(with[b].data(), w, h, 3), {}});
+            vo.push_back({*make_image_view(without[b].data(), w, h, 3), {}});
+        }
+        cross_buffer_detector dw(o), dof(off);
+        const cross_buffer_report rw = dw.process(vw), ro = dof.process(vo);
+        REQUIRE(rw.ok());
+        REQUIRE(ro.ok());
+        double added = 0;
+        for (std::size_t i = 0; i < static_cast<std::size_t>(w * h * 3); ++i)
+            for (std::size_t b = 0; b < k; ++b) added += (static_cast<double>(with[b][i]) - without[b][i]) / k / 3;
+        INFO("evidence " << evidence);
+        REQUIRE(added > 0);
+        CHECK(rw.energy_returned == Approx(added).epsilon(1e-4));
+    }
 }

@@ -3,9 +3,11 @@
 #include <firefly/sim/metrics.hpp>
 #include <firefly/sim/scene.hpp>
 
+#include <cfloat>
 #include <cmath>
 #include <cstring>
 #include <deque>
+#include <limits>
 #include <thread>
 #include <vector>
 
@@ -336,4 +338,34 @@ TEST_CASE("the spatial estimate stays finite where double neighbours near DBL_MA
     CHECK(a < 1e-300);  // a spatial estimate that noisy is all but left out
     for (int c = 0; c < 6; ++c) CHECK(std::isfinite(out[c]));
     for (int c = 0; c < 3; ++c) CHECK(out[c] == Approx(a * -DBL_MAX + (1 - a) * 4.0));  // a S ~ -15
+}
+
+TEST_CASE("float halves near FLT_MAX: a rebuilt variance is held within the float range", "[cross_half][numerics]") {
+    // Half B's variance FLT_MAX everywhere, A's (FLT_MAX, 0, 0), the colour 3.5e19; A fails at
+    // one pixel, where B reads 1. The blend's variance of one channel passes FLT_MAX (the bias
+    // term is the channels' mean); before, the float store made it +inf from finite input.
+    const int w = 16, h = 16, n = w * h;
+    const float level = 3.5e19f;
+    std::vector<float> ac(n * 3, level), av(n * 3, 0.0f), bc(n * 3, level), bv(n * 3, FLT_MAX);
+    for (int i = 0; i < n; ++i) av[static_cast<std::size_t>(i) * 3] = FLT_MAX;
+    const std::size_t p = 8 * w + 8;
+    for (std::size_t c = 0; c < 3; ++c) ac[p * 3 + c] = std::numeric_limits<float>::quiet_NaN(), bc[p * 3 + c] = 1.0f;
+    half_buffer<float> a{*make_image_view(ac.data(), w, h, 3), *make_image_view(av.data(), w, h, 3), {}};
+    half_buffer<float> b{*make_image_view(bc.data(), w, h, 3), *make_image_view(bv.data(), w, h, 3), {}};
+    std::vector<std::uint8_t> ma(n), mb(n);
+    detector d;
+    const frame_report r = d.process(a, b, *make_image_view(ma.data(), w, h, 1), *make_image_view(mb.data(), w, h, 1));
+    REQUIRE(r.error.ok());
+    CHECK((ma[p] & mask_bits::other_half) != 0);
+    for (const std::vector<float>* v : {&ac, &av, &bc, &bv})
+        for (const float x : *v) REQUIRE(std::isfinite(x));
+    // the store itself: finite doubles past the range are held, inf and NaN stay
+    using ct = channel_traits<float>;
+    CHECK(ct::store(1e39) == FLT_MAX);
+    CHECK(ct::store(-DBL_MAX) == -FLT_MAX);
+    CHECK(ct::store(static_cast<double>(FLT_MAX)) == FLT_MAX);
+    CHECK(std::isinf(ct::store(HUGE_VAL)));
+    CHECK(ct::store(-HUGE_VAL) < 0);
+    CHECK(std::isnan(ct::store(std::nan(""))));
+    CHECK(ct::store(1e-46) == 0.0f);  // below the denormals: rounds as ever
 }

@@ -126,6 +126,13 @@ TEST_CASE("implausible_buffers: buffers against the others, step-down", "[implau
     const std::uint64_t t = found(tie, 4, rv_tie), ts = found(tie_swapped, 4, rv_tie_swapped);
     CHECK(((t & 1u) != 0) == ((ts & 2u) != 0));
     CHECK(((t & 2u) != 0) == ((ts & 1u) != 0));
+    // the same garbage in two buffers, one carrying a variance that holds it: the same bits in
+    // either order (before, the one ranked second by index set the noise: 0 one way, 0x3 the other)
+    const double same[6] = {1e30, 1e30, 1.0, 1.1, 0.9, 1.05};
+    const double rv_same[6] = {1e-40, 1.0, 0.01, 0.01, 0.01, 0.01}, rv_same_swapped[6] = {1.0, 1e-40, 0.01, 0.01, 0.01, 0.01};
+    CHECK(found(same, 6, rv_same) == found(same, 6, rv_same_swapped));
+    const double rv_unknown[6] = {nan_v, 1e-40, 0.01, 0.01, 0.01, 0.01}, rv_unknown_swapped[6] = {1e-40, nan_v, 0.01, 0.01, 0.01, 0.01};
+    CHECK(found(same, 6, rv_unknown) == found(same, 6, rv_unknown_swapped));
     // a variance unknown in R (a level of 0) leaves the candidate's own variance in charge: a
     // firefly carrying its variance is no garbage
     const double dark[4] = {0.0, 0.001, 0.0012, 2e5};

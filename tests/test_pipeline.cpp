@@ -220,6 +220,65 @@ TEST_CASE("a noisy highlight spot with a firefly beside it is kept whole", "[pip
     CHECK(hv.col(0, 23, 21) < 5.0f);
 }
 
+TEST_CASE("a firefly of negative sign in one half is rebuilt, as a positive one is", "[pipeline][highlight]") {
+    // One sample of 1e4 among 16 through a filter's negative lobe: half A reads -624, half B
+    // its ordinary ~0.5. Before, only an excess upwards counted against the other half, and the
+    // pixel was kept as within its noise (consistent) at -624; a pair of negative fireflies was
+    // rebuilt all along.
+    for (const float sign : {1.0f, -1.0f}) {
+        halves hv(flat(64, 48, 11));
+        const float m = 1e4f / 16, v = 1e4f * 1e4f / 16 / 16;
+        hv.set(0, 30, 20, hv.col(0, 30, 20) + sign * m, v);
+        const frame_report r = process_without_return(hv);
+        REQUIRE(r.error.ok());
+        INFO("sign " << sign << ", mask " << int(hv.mask[0][hv.at(30, 20)]));
+        CHECK((hv.mask[0][hv.at(30, 20)] & mask_bits::firefly) != 0);
+        CHECK(hv.col(0, 30, 20) > 0.25f);  // the flat frame's level: 0.5
+        CHECK(hv.col(0, 30, 20) < 1.0f);
+    }
+    // the excess in the outlier's direction
+    CHECK(signed_excess(5.0, 1.0) == 4.0);
+    CHECK(signed_excess(-5.0, 1.0) == 6.0);
+    CHECK(signed_excess(-5.0, -1.0) == 4.0);
+    CHECK(signed_excess(-1.0, -5.0) == -4.0);
+    // halves of opposite sign agree on nothing (before: -600 and 600 within a factor of 1)
+    highlight_options agree;
+    agree.rule = highlight_rule::agree;
+    CHECK_FALSE(is_highlight(agree, -600.0, 600.0, 1.0, 1.0, 1.0));
+    CHECK_FALSE(is_highlight(agree, -600.0, 200.0, 1.0, 1.0, 1.0));
+    CHECK(is_highlight(agree, -600.0, -200.0, 1.0, 1.0, 1.0));
+    CHECK(is_highlight(agree, 600.0, 200.0, 1.0, 1.0, 1.0));
+}
+
+TEST_CASE("a firefly on a kept highlight, rebuilt from the other half, is read by neither half's spatial rebuild", "[pipeline][highlight]") {
+    // A one-pixel highlight (30, confident in both halves) with a NaN beside it in both halves
+    // (rebuilt spatially in each, from neighbours that are not outliers). With a firefly on the
+    // highlight in half A, A's highlight pixel is rebuilt from B's (the highlight's value);
+    // before, it then became a source for A alone, and A's NaN pixel came out 3.93, not ~0.5.
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    float rebuilt[2][2] = {};
+    for (const bool on_highlight : {false, true}) {
+        halves hv(flat(64, 48, 8));
+        for (int half = 0; half < 2; ++half) {
+            hv.set(half, 20, 20, 30.0f, 0.5f);
+            hv.set(half, 21, 20, nan, 0.5f);
+        }
+        if (on_highlight) hv.set(0, 20, 20, 3000.0f, 3000.0f * 3000.0f / 4);
+        const frame_report r = process_without_return(hv);
+        REQUIRE(r.error.ok());
+        for (int half = 0; half < 2; ++half) rebuilt[on_highlight][half] = hv.col(half, 21, 20);
+        if (on_highlight) {
+            CHECK((hv.mask[0][hv.at(20, 20)] & mask_bits::other_half) != 0);
+            CHECK(hv.col(0, 20, 20) == Approx(30.0f).epsilon(0.01));  // B's, blended
+        }
+    }
+    for (int half = 0; half < 2; ++half) {
+        INFO("half " << half);
+        CHECK(rebuilt[1][half] == rebuilt[0][half]);
+        CHECK(rebuilt[1][half] < 1.0f);
+    }
+}
+
 TEST_CASE("a noisy highlight spot stays whole where one of its pixels is an outlier in one half only", "[pipeline][highlight]") {
     // A 4x4 spot of relative error 0.6 (a cluster by its density of pairs alone). One pixel is NaN
     // in half B (a failed sample), or confident in half B (its spread under the global test's

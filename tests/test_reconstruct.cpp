@@ -343,3 +343,38 @@ TEST_CASE("reconstruct: outside pixels are never read", "[reconstruct][alpha]") 
     CHECK(r.error.ok());
     CHECK(lone.at(1, 1, 0) == 1e30f);
 }
+
+TEST_CASE("reconstruct: a pixel only excluded ones reach reads them, and no other pixel does", "[reconstruct]") {
+    // A cluster of two beside a kept highlight (excluded, 100) on a background of 1; far away, a
+    // marked pixel inside a block of excluded pixels, which it reads after all. Before, that
+    // fallback made every excluded pixel a source for the whole frame's phase 2, and the
+    // cluster read the highlight: 5.01 and 13.1 instead of 1 and 1.
+    const int w = 40, h = 12;
+    auto run = [&](bool far_block, std::vector<float>& px) {
+        px.assign(static_cast<std::size_t>(w * h), 1.0f);
+        std::vector<std::uint8_t> m(px.size(), 0);  // 0 source, 1 rebuild, 2 excluded
+        m[5 * w + 5] = m[5 * w + 6] = 1;
+        px[5 * w + 5] = px[5 * w + 6] = 1000.0f;
+        m[5 * w + 7] = 2;
+        px[5 * w + 7] = 100.0f;
+        if (far_block) {
+            for (int y = 3; y <= 9; ++y)
+                for (int x = 28; x <= 34; ++x) m[static_cast<std::size_t>(y * w + x)] = 2, px[static_cast<std::size_t>(y * w + x)] = 50.0f;
+            m[6 * w + 31] = 1;
+            px[6 * w + 31] = 1e4f;
+        }
+        reconstruct_scratch s;
+        return reconstruct(*make_image_view(px.data(), w, h, 1), image_view<float>(), m.data(), {}, s, 0xFF,
+                           [](std::uint8_t v) { return v == 1 ? pixel_role::rebuild : v == 2 ? pixel_role::excluded : pixel_role::source; });
+    };
+    std::vector<float> alone, with_far;
+    REQUIRE(run(false, alone).error.ok());
+    const reconstruct_report r = run(true, with_far);
+    REQUIRE(r.error.ok());
+    CHECK(alone[5 * w + 5] == 1.0f);
+    CHECK(alone[5 * w + 6] == 1.0f);
+    CHECK(with_far[5 * w + 5] == alone[5 * w + 5]);
+    CHECK(with_far[5 * w + 6] == alone[5 * w + 6]);
+    CHECK(with_far[6 * w + 31] == 50.0f);  // the block's level: all it can read
+    CHECK(r.unreachable == 0);
+}

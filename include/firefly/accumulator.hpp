@@ -7,7 +7,8 @@
 // sum of squared deviations in double: M2 only ever adds delta * (x - mean), two factors of
 // one sign, so it never goes negative, and a 1e30 sample next to 1e-3 samples loses nothing
 // to cancellation (no sum of squares is subtracted). A NaN or Inf sample makes that pixel's
-// buffer non-finite; the detector rebuilds it from the other buffers.
+// buffer non-finite; the detector rebuilds it from the other buffers. So does a buffer pixel
+// that got no sample (fewer than K samples: adaptive sampling), which reads NaN, not black.
 //
 // Threads: add() and add_tile() may run concurrently without locks as long as no two calls
 // at the same time touch the same pixel (disjoint tiles, rows or pixels per thread; the
@@ -17,9 +18,9 @@
 // Memory: K x pixels x (1 count + 2 doubles per channel), plus the float views from finish().
 #pragma once
 
-#include <cfloat>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "buffers.hpp"
@@ -68,7 +69,9 @@ public:
         if (x < 0 || y < 0 || x >= w_ || y >= h_ || value == nullptr)
             return status{errc::invalid_argument, "accumulator: sample outside the image"};
         if (count_[cell_of(x, y, sample_index)] == UINT32_MAX) return full();
-        add_unchecked(x, y, sample_index, value);
+        double v[4];
+        for (int c = 0; c < nc_; ++c) v[c] = value[c];
+        add_unchecked(x, y, sample_index, v);
         return ok_status();
     }
 
@@ -83,19 +86,21 @@ public:
         for (int j = 0; j < tile.height(); ++j)  // all of the tile or nothing
             for (int i = 0; i < tile.width(); ++i)
                 if (count_[cell_of(x0 + i, y0 + j, sample_index)] == UINT32_MAX) return full();
-        float v[4];
+        double v[4];  // (a double tile's samples as they are: no narrowing before the sums)
         for (int j = 0; j < tile.height(); ++j)
             for (int i = 0; i < tile.width(); ++i) {
-                for (int c = 0; c < nc_; ++c) v[c] = static_cast<float>(tile.load(i, j, c));
+                for (int c = 0; c < nc_; ++c) v[c] = tile.load(i, j, c);
                 add_unchecked(x0 + i, y0 + j, sample_index, v);
             }
         return ok_status();
     }
 
     // Mean colour and variance of the mean, per buffer, as float. A buffer pixel with no
-    // sample is 0 with variance 0; with one sample its variance is unknown and is set to the
-    // sample's square (relative standard error 1: the least it can claim). Variances beyond
-// FLT_MAX (a 1e30 sample) are stored as FLT_MAX.
+    // sample is NaN, colour and variance: no value, which the detector rebuilds from the
+    // buffers that have one (0 read as black: at 3 samples for 8 buffers a pixel kept 0.38 of
+    // its light); with one sample its variance is unknown and is set to the sample's square
+    // (relative standard error 1: the least it can claim). Finite values beyond FLT_MAX (a
+    // 1e30 sample's variance) are stored as FLT_MAX.
     void finish() {
         const std::size_t px = static_cast<std::size_t>(w_) * static_cast<std::size_t>(h_);
         for (int b = 0; b < k_; ++b)
@@ -104,12 +109,12 @@ public:
                 const double n = count_[cell];
                 for (int c = 0; c < nc_; ++c) {
                     const std::size_t e = cell * static_cast<std::size_t>(nc_) + static_cast<std::size_t>(c);
-                    const double m = mean_[e];
+                    const double m = n > 0 ? mean_[e] : std::numeric_limits<double>::quiet_NaN();
                     double var = n >= 2 ? m2_[e] / (n - 1) / n : m * m;
                     if (!(var >= 0) && var == var) var = 0;  // never negative (NaN stays NaN)
-                    if (var > FLT_MAX) var = FLT_MAX;         // float saturates, never turns Inf
-                    color_[static_cast<std::size_t>(b)][p * static_cast<std::size_t>(nc_) + static_cast<std::size_t>(c)] = static_cast<float>(m);
-                    variance_[static_cast<std::size_t>(b)][p * static_cast<std::size_t>(nc_) + static_cast<std::size_t>(c)] = static_cast<float>(var);
+                    using ct = channel_traits<float>;         // float saturates, never turns Inf
+                    color_[static_cast<std::size_t>(b)][p * static_cast<std::size_t>(nc_) + static_cast<std::size_t>(c)] = ct::store(m);
+                    variance_[static_cast<std::size_t>(b)][p * static_cast<std::size_t>(nc_) + static_cast<std::size_t>(c)] = ct::store(var);
                 }
             }
     }
@@ -147,7 +152,7 @@ private:
     static status full() noexcept {
         return status{errc::size_overflow, "accumulator: 2^32 - 1 samples in one pixel of one buffer"};
     }
-    void add_unchecked(int x, int y, std::uint64_t sample_index, const float* value) noexcept {
+    void add_unchecked(int x, int y, std::uint64_t sample_index, const double* value) noexcept {
         const std::size_t cell = cell_of(x, y, sample_index);
         const double n = ++count_[cell];
         double* mean = &mean_[cell * static_cast<std::size_t>(nc_)];

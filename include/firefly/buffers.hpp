@@ -450,7 +450,7 @@ public:
     // Work memory kept between frames, bytes (the K = 2 detector's included).
     std::size_t scratch_bytes() const noexcept {
         return (noise_.capacity() + log_p_.capacity() + excess_.capacity()) *
-                   sizeof(double) + (level_.capacity() + mean_level_.capacity()) * sizeof(float) + refined_.capacity() + untested_.capacity() +
+                   sizeof(double) + (level_.capacity() + mean_level_.capacity()) * sizeof(float) + refined_.capacity() + no_return_.capacity() +
                dropped_at_.capacity() * sizeof(std::uint64_t) + dropped_scratch_.bytes() +
                dropped_found_.capacity() * sizeof(dropped_pixel) +
                energy_.bytes() + density_.bytes() + density_light_.capacity() * sizeof(density_return::light) +
@@ -564,8 +564,8 @@ private:
         noise_.resize(rep.pixels);
         level_.resize(rep.pixels);
         mean_level_.resize(rep.pixels);
-        if (returns_energy(b, k, clean)) excess_.assign(rep.pixels * 3, 0.0), untested_.assign(rep.pixels, 0);
-        else excess_.clear(), untested_.clear();
+        if (returns_energy(b, k, clean)) excess_.assign(rep.pixels * 3, 0.0), no_return_.assign(rep.pixels, 0);
+        else excess_.clear(), no_return_.clear();
         implausible_bound_ = detail::implausible_bound(b[0].color.pixel_count() * static_cast<std::size_t>(k), options_.alpha);
         find_dropped_buffers(b, k, has_var);
         exec_.run(static_cast<std::size_t>(h), [&](std::size_t y) {
@@ -665,12 +665,12 @@ private:
         }
         p.rel_var[s] = std::numeric_limits<double>::quiet_NaN();
         if (has_var) {
-            const bool one = b.variance.channels() == 1;
-            for (int c = 0; c < ncol; ++c) {
-                const double v = b.variance.load(x, y, one ? 0 : c);
+            const int nv = b.variance.channels();
+            for (int c = 0; c < nv; ++c) {  // every channel, as the colour's (alpha's too)
+                const double v = b.variance.load(x, y, c);
                 fin += v - v;
-                sd += std::sqrt((std::max)(v, 0.0));
             }
+            for (int c = 0; c < ncol; ++c) sd += std::sqrt((std::max)(b.variance.load(x, y, nv == 1 ? 0 : c), 0.0));
             const double rel = (sd / ncol) / std::fabs(p.level[s]);
             if (p.level[s] != 0 && std::isfinite(rel)) p.rel_var[s] = rel * rel;
         }
@@ -944,7 +944,7 @@ private:
             if (bad > k / 2) {
                 rc.left += before ? 0 : 1;
                 write_left_masks(masks, p, x, y);
-                if (!untested_.empty()) untested_[index(x, y, w)] = 1;
+                if (!no_return_.empty()) no_return_[index(x, y, w)] = 1;
                 continue;
             }
             if (p.usable >= 3 && !before) ++rc.tested;
@@ -1016,8 +1016,12 @@ private:
             rc.implausible += static_cast<std::size_t>(implausible);
             for (int i = 0; i < k; ++i) rc.per_buffer[static_cast<std::size_t>(i)] += p.flagged[static_cast<std::size_t>(i)];
             write_masks(masks, p, x, y);
-            if (!untested_.empty() && p.usable < 3) untested_[index(x, y, w)] = 1;
+            if (!no_return_.empty() && p.usable < 3) no_return_[index(x, y, w)] = 1;
             if (clean && (flags > 0 || bad > 0)) rebuild(b, p, x, y, has_var, excess_.empty() ? nullptr : &excess_[index(x, y, w) * 3]);
+            if (clean && flags > 0 && !excess_.empty()) {  // a rebuild that took nothing gets nothing back
+                const double* e = &excess_[index(x, y, w) * 3];
+                if (!(e[0] > 0 || e[1] > 0 || e[2] > 0)) no_return_[index(x, y, w)] = 1;
+            }
         }
     }
 
@@ -1120,6 +1124,9 @@ private:
         if constexpr (!std::is_const_v<C>)
             detail::for_each_energy_row(energy_, w, h, exec_, [&](int y, const double* add) { give_back_row(b, k, y, add); });
         for (const double r : energy_.row_returned) rep.energy_returned += r;
+        // (double buffers: excess up to DBL_MAX / 64 a pixel-buffer sums past the range)
+        rep.energy_removed = (std::min)(rep.energy_removed, DBL_MAX);
+        rep.energy_returned = (std::min)(rep.energy_returned, DBL_MAX);
     }
 
     // return_energy's finest scale (density.hpp), on the mean image: each pixel's removed
@@ -1141,7 +1148,7 @@ private:
         density_return d;
         d.prepare(w, h, density_);
         for (std::size_t p = 0; p < density_.removed.size(); ++p)
-            density_.removed[p] = (excess_[p * 3] > 0 || excess_[p * 3 + 1] > 0 || excess_[p * 3 + 2] > 0) && !untested_[p];
+            density_.removed[p] = (excess_[p * 3] > 0 || excess_[p * 3 + 1] > 0 || excess_[p * 3 + 2] > 0) && !no_return_[p];
         if (!d.needed(options_.energy_density_evidence, density_)) return 0.0;
         auto load = [&](int x, int y, double* v) {  // the excess, none, |e|^2, the cleaned mean's level
             const std::size_t p = index(x, y, w);
@@ -1158,7 +1165,7 @@ private:
             }
         };
         // none where a pixel's own fireflies could not be told: none removed there
-        auto receives = [&](int x, int y) { return !untested_[index(x, y, w)]; };
+        auto receives = [&](int x, int y) { return !no_return_[index(x, y, w)]; };
         if (!d.run(options_.energy_density_evidence, density_, density_light_, exec_, load, receives)) return 0.0;
         double given = 0;
         for (const density_return::light& l : density_light_) {
@@ -1166,8 +1173,11 @@ private:
             const double f = d.taken(l.pixel);  // (0 where nothing was removed)
             double add[3];
             for (int c = 0; c < 3; ++c) {
-                add[c] = l.add[0][c];
-                if (density_.removed[l.pixel]) add[c] = (std::min)(add[c], f * excess_[l.pixel * 3 + static_cast<std::size_t>(c)]);
+                // (none in a channel whose excess is negative, as a red firefly's on grey:
+                // light is only added, and the total counts what was)
+                add[c] = (std::max)(static_cast<double>(l.add[0][c]), 0.0);
+                if (density_.removed[l.pixel])
+                    add[c] = (std::min)(add[c], f * (std::max)(excess_[l.pixel * 3 + static_cast<std::size_t>(c)], 0.0));
             }
             if (add_to_every_buffer(b, k, x, y, add)) given += (add[0] + add[1] + add[2]) / 3.0;
         }
@@ -1211,10 +1221,11 @@ private:
 
     // Row y's return (3 per pixel) added to every buffer alike, or to none where a sum does
     // not fit a buffer's type. Where something was removed, at most that (the pixel's mean
-    // ends above its input's by float rounding at most: as in return_energy_to_image); none where fewer than 3
-    // buffers were usable, whose own fireflies could not be told apart and are all still there
-    // (at K = 4, a tile black in two renders came out 1.44x its expected light on the simulated
-    // caustics).
+    // ends above its input's by float rounding at most: as in return_energy_to_image); none
+    // where a flagged buffer's rebuild took nothing (no channel's excess above 0, as two
+    // halves' untaken pixels), or where fewer than 3 buffers were usable, whose own fireflies
+    // could not be told apart and are all still there (at K = 4, a tile black in two renders
+    // came out 1.44x its expected light on the simulated caustics).
     template <class C, class V>
     void give_back_row(const buffer_view<C, V>* b, int k, int y, const double* returned) {
         const int w = b[0].color.width();
@@ -1225,7 +1236,7 @@ private:
             const double* removed = &excess_[index(x, y, w) * 3];
             if (removed[0] > 0 || removed[1] > 0 || removed[2] > 0) add = detail::at_most(add, removed, capped);
             if (!(add[0] + add[1] + add[2] > 0)) continue;  // wherever positive (energy.hpp)
-            if (untested_[index(x, y, w)]) continue;  // its own fireflies could not be told: none removed
+            if (no_return_[index(x, y, w)]) continue;  // its fireflies could not be told, or none were removed
             if (add_to_every_buffer(b, k, x, y, add)) energy_.row_returned[row] += (add[0] + add[1] + add[2]) / 3.0;
         }
     }
@@ -1245,7 +1256,8 @@ private:
     std::vector<float> mean_level_;  // per pixel: the mean y of its usable buffers (NaN: none)
     std::vector<std::uint8_t> refined_;  // per pixel: its noise pooled without the buffers flagged at the cap
     std::vector<double> excess_;        // energy return: what was removed, 3 channels per pixel
-    std::vector<std::uint8_t> untested_;  // energy return: pixels with fewer than 3 usable buffers
+    std::vector<std::uint8_t> no_return_;  // energy return: pixels that get none (fewer than 3 usable
+                                           // buffers; a rebuild that took nothing)
                                           // (left, or rebuilt without a test): none given back
     std::vector<std::uint64_t> dropped_at_;  // the buffers found dropped at a pixel, bit i buffer i (empty: none)
     dropped_scratch dropped_scratch_;

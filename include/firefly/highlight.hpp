@@ -92,6 +92,13 @@ struct highlight_options {
     double cluster_relative_error = 0.8;  // confident, for pixels with a both-half neighbour
 };
 
+// How far an outlier's half stands from the other half, in the outlier's direction: l_out -
+// l_other, or its negation where l_out is below 0 (a firefly through a filter's negative lobe
+// lowers its pixel; a pair of them is judged by magnitude too, in is_highlight).
+inline double signed_excess(double l_out, double l_other) noexcept {
+    return l_out < 0 ? l_other - l_out : l_out - l_other;
+}
+
 // Decide an outlier of one half only: true when it stands out against the other half.
 // l_out, l_other: mean colour in the outlier's half and in the other; v_other: the other
 // half's reduced variance; calibration as for is_highlight.
@@ -99,15 +106,15 @@ inline bool exceeds_other_half(const highlight_options& o, double l_out, double 
                                double v_other, double calibration) noexcept {
     if (!(o.min_excess_z > 0)) return true;
     const double noise = std::sqrt(2.0 * (std::max)(v_other, 0.0) * calibration);
-    return l_out - l_other > o.min_excess_z * noise;
+    return signed_excess(l_out, l_other) > o.min_excess_z * noise;
 }
 
-// The excess itself, in the other half's noise: (l_out - l_other) / sqrt(2 v_other calibration)
-// (+infinity when that noise is 0 and l_out is higher). Its normal tail is the p-value the
+// The excess itself, in the other half's noise: signed_excess / sqrt(2 v_other calibration)
+// (+infinity when that noise is 0 and the excess positive). Its normal tail is the p-value the
 // frame-level decision ranks a one-half outlier by (fdr.hpp).
 inline double excess_z(double l_out, double l_other, double v_other, double calibration) noexcept {
     const double noise = std::sqrt(2.0 * (std::max)(v_other, 0.0) * calibration);
-    const double d = l_out - l_other;
+    const double d = signed_excess(l_out, l_other);
     return noise > 0 ? d / noise : d > 0 ? HUGE_VAL : 0.0;
 }
 
@@ -204,6 +211,7 @@ inline bool is_highlight(const highlight_options& o, double la, double lb, doubl
     const bool want_conf =
         o.rule == highlight_rule::confident || o.rule == highlight_rule::confident_and_agree;
     if (want_agree) {
+        if ((la < 0) != (lb < 0)) return false;  // halves of opposite sign agree on nothing
         const double lo = (std::min)(std::fabs(la), std::fabs(lb));
         const double hi = (std::max)(std::fabs(la), std::fabs(lb));
         if (!(hi <= o.max_ratio * lo)) return false;

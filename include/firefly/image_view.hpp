@@ -7,6 +7,7 @@
 // A stride of `auto_stride` (0) means "packed".
 #pragma once
 
+#include <cfloat>
 #include <cstddef>
 #include <cstdint>
 #include <limits>
@@ -30,7 +31,13 @@ template <>
 struct channel_traits<float> {
     static constexpr bool is_specialized = true;
     static constexpr double load(float v) noexcept { return v; }
-    static constexpr float store(double v) noexcept { return static_cast<float>(v); }
+    // A finite value past the float range is held at +-FLT_MAX (the plain cast is undefined
+    // there, +-inf in practice: finite input would give infinite output); inf and NaN stay.
+    static constexpr float store(double v) noexcept {
+        return v > FLT_MAX && v <= DBL_MAX     ? FLT_MAX
+               : v < -FLT_MAX && v >= -DBL_MAX ? -FLT_MAX
+                                               : static_cast<float>(v);
+    }
 };
 
 template <>

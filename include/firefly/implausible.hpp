@@ -62,10 +62,11 @@ inline int implausible_half(double la, double lb, double va, double vb, double b
 }
 
 // K buffers (buffers.hpp): the same test of buffers against the others. The usable buffers
-// (use[i]) ranked by magnitude, largest first (by value among equal magnitudes); as in the
-// step-down of buffers.hpp, for i from floor(u / 2) down to 1 the i-th, level l, against R, the
-// ones ranked below it (n = |R| >= 2, mean m), where the i-th's magnitude is above the next
-// one's (a tie cut in two would make the result depend on the buffers' order):
+// (use[i]) ranked by magnitude, largest first (by value among equal magnitudes, then by
+// variance: the same ranks in any buffer order); as in the step-down of buffers.hpp, for i
+// from floor(u / 2) down to 1 the i-th, level l, against R, the ones ranked below it
+// (n = |R| >= 2, mean m), where the i-th's magnitude is above the next one's (a tie cut in two
+// would make the result depend on the buffers' order):
 //     z = |l - m| / max(noise, |m|)
 // the noise that of l - m: with the i-th buffer's variance known (rel_var[i] l^2, a variance of
 // the mean), sqrt(v + mean_R(v) / n) over R's known variances, as for two halves (a firefly's
@@ -89,7 +90,11 @@ inline std::uint64_t implausible_buffers(const double* level, const double* rel_
     int rank[64], u = 0;
     auto above = [&](int a, int b) {  // a ranks before b
         const double ma = std::fabs(level[a]), mb = std::fabs(level[b]);
-        return ma > mb || (ma == mb && level[a] > level[b]);
+        if (ma != mb) return ma > mb;
+        if (level[a] != level[b]) return level[a] > level[b];
+        // Equal levels by variance, unknown first: the last of a tie (the i-th, whose variance
+        // the test reads) has the largest known one, whatever the buffers' order.
+        return std::isnan(rel_var[a]) ? !std::isnan(rel_var[b]) : rel_var[a] < rel_var[b];
     };
     for (int i = 0; i < k && i < 64; ++i) {  // insertion, largest first
         if (!use[i]) continue;

@@ -259,7 +259,7 @@ public:
                   h.implausible.capacity()) * sizeof(std::uint32_t) +
                  h.cross_values.capacity() * sizeof(double) + h.decision.capacity() +
                  h.band_counts.capacity() * sizeof(stddev_counts) + h.before.capacity() * sizeof(float) + h.added.capacity() +
-                 h.outside.capacity() +
+                 h.outside.capacity() + h.cross_kept.capacity() +
                  h.held.capacity() * sizeof(std::uint32_t) + h.held_values.capacity() * sizeof(float) + h.held_shares.capacity() +
                  h.recon.bytes();
         return n + energy_.bytes() + density_.bytes() + density_light_.capacity() * sizeof(density_return::light) +
@@ -313,6 +313,8 @@ private:
         std::vector<std::uint32_t> fix;      // pixels to rebuild, row-major
         std::vector<std::uint32_t> cross;    // those rebuilt from the other half
         std::vector<double> cross_values;    // their new values, entry x channel
+        std::vector<std::uint8_t> cross_kept;  // per entry: the other half keeps an outlier
+                                               // there (read by neither half's spatial rebuild)
         std::vector<std::uint8_t> decision;  // per entry of a list: its outcome (chunked stages)
         std::vector<double> log_p;           // per outlier (order): the p-value (log) of a one-half
                                              // firefly, for the frame's decision; NaN: not one
@@ -1227,6 +1229,7 @@ private:
                           const half_state& o, const frame_report& rep) {
         s.cross.clear();
         s.cross_values.clear();
+        s.cross_kept.clear();
         const int w = own.color.width();
         const int nch = own.color.channels() + own.variance.channels();
         s.recon.kernel_.set(options_.reconstruction.kernel_width, options_.reconstruction.sigma);
@@ -1256,7 +1259,7 @@ private:
                 (void)detail::cross_half_estimate(hv[0], hv[1], s.recon.kernel_, rep.variance_calibration,
                                                   options_.blend_spatial, x, y, readable, readable_other,
                                                   &s.cross_values[e * stride]);
-                s.decision[e] = 1;
+                s.decision[e] = lo[p] & outlier_bit ? 2 : 1;  // a kept highlight, say
             }
         });
         for (std::size_t e = 0; e < n; ++e) {
@@ -1264,6 +1267,7 @@ private:
             if (s.cross.size() != e)
                 std::copy_n(&s.cross_values[e * stride], stride, &s.cross_values[s.cross.size() * stride]);
             s.cross.push_back(s.fix[e]);
+            s.cross_kept.push_back(s.decision[e] == 2);
         }
         s.cross_values.resize(s.cross.size() * stride);
     }
@@ -1501,13 +1505,15 @@ private:
                 const double* v = &s.cross_values[e * static_cast<std::size_t>(nc + nv)];
                 for (int c = 0; c < nc; ++c) hb.color.store(x, y, c, v[c]);
                 for (int c = 0; c < nv; ++c) hb.variance.store(x, y, c, v[nc + c]);
-                label[p] = static_cast<std::uint8_t>((label[p] & ~fix_bit) | other_half_bit);
+                label[p] = static_cast<std::uint8_t>((label[p] & ~fix_bit) | (s.cross_kept[e] ? 0 : other_half_bit));
             }
             r.from_other_half = s.cross.size();
         }
         // Spatially: what is bad in both halves (or everything, with rebuild = spatial).
-        // Sources exclude every outlier and non-finite pixel not rebuilt from the other half;
-        // a pixel without geometry is never read (no_geometry_bit, set for the rebuild alone).
+        // Sources exclude every outlier and non-finite pixel not rebuilt from the other half,
+        // and those rebuilt from an outlier the other half keeps (a firefly on a highlight:
+        // the highlight's value, excluded in both halves; other_half_bit set after); a pixel
+        // without geometry is never read (no_geometry_bit, set for the rebuild alone).
         const bool uncovered = mark_no_geometry(hb, s, r);
         auto role = [](std::uint8_t m) {
             if (m & fix_bit) return pixel_role::rebuild;
@@ -1521,6 +1527,9 @@ private:
             reconstruct(hb.color, hb.variance, label, options_.reconstruction, s.recon, interesting, role);
         if (uncovered)
             for (std::uint8_t& l : s.label) l = static_cast<std::uint8_t>(l & ~no_geometry_bit);
+        if (cross)
+            for (std::size_t e = 0; e < s.cross.size(); ++e)
+                if (s.cross_kept[e]) label[s.cross[e]] |= other_half_bit;
         r.phase1_rounds = rr.phase1_rounds;
         r.phase2_iterations = rr.phase2_iterations;
         r.final_change = rr.final_change;

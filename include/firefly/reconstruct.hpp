@@ -21,8 +21,9 @@
 //
 // A marked pixel that no source can reach (its whole neighbourhood, transitively, is marked
 // or excluded: a firefly inside a kept highlight region) reads the excluded pixels after
-// all (never the outside ones); one that nothing can reach keeps its values and is reported
-// (unreachable, no_valid_pixels).
+// all (never the outside ones), in two more phases run once every other pixel is settled:
+// what it reads changes no pixel elsewhere. One that nothing can reach keeps its values and
+// is reported (unreachable, no_valid_pixels).
 //
 // Exact symmetry: the weighted sums are kernel.hpp's flip-exact trees, so a flipped or
 // transposed input gives a bit-identical (flipped) output.
@@ -139,15 +140,17 @@ inline void queue_neighbours(std::size_t p, int w, int h, int r, std::uint8_t wa
         }
 }
 
-// After phase 1 left pixels pending: excluded pixels become sources (state 0), and list_
-// gets the pending pixels that now have one within the kernel. False when there are none.
+// After both phases left pixels pending: excluded and rebuilt pixels become sources (state
+// 0; the rebuilt ones are final), and list_ gets the pending pixels that now have one within
+// the kernel. False when there are none.
 inline bool fallback_to_excluded(reconstruct_scratch& s, int w, int h, int r) {
     s.next_.clear();
-    for (std::size_t p = 0; p < s.state_.size(); ++p)
-        if (s.state_[p] == 3) {
-            s.state_[p] = 0;
-            queue_neighbours(p, w, h, r, 1, s);
-        }
+    for (std::size_t p = 0; p < s.state_.size(); ++p) {
+        if (s.state_[p] == 2) s.state_[p] = 0;
+        if (s.state_[p] != 3) continue;
+        s.state_[p] = 0;
+        queue_neighbours(p, w, h, r, 1, s);
+    }
     std::sort(s.next_.begin(), s.next_.end());
     s.list_.swap(s.next_);
     s.next_.clear();
@@ -224,7 +227,7 @@ public:
                 change = (std::max)(change, c);
                 if (c > o.tolerance) queue_neighbours(s_.list_[e], w_, h_, r_, 2, s_);
             }
-            rep.phase2_iterations = it + 1;
+            ++rep.phase2_iterations;
             rep.final_change = change;
             advance(s_);
         }
@@ -354,14 +357,19 @@ reconstruct_report reconstruct(const image_view<C>& color, const image_view<V>& 
     const int r = o.kernel_width / 2;
     detail::rebuilder<C, V> rb(color, variance, s, r);
     std::size_t pending = rep.pixels - rb.fill(rep);
+    rb.settle(rep, o);
     // Pixels no source can reach (a firefly inside a kept highlight region, say) may read
-    // the excluded pixels after all, rather than stay as they are.
-    if (pending > 0 && detail::fallback_to_excluded(s, color.width(), color.height(), r)) pending -= rb.fill(rep);
+    // the excluded pixels after all, rather than stay as they are; the others are settled
+    // already, and read none of it (before, one such pixel anywhere let every rebuilt cluster
+    // beside a kept highlight read it).
+    if (pending > 0 && detail::fallback_to_excluded(s, color.width(), color.height(), r)) {
+        pending -= rb.fill(rep);
+        rb.settle(rep, o);
+    }
     if (pending > 0) {
         rep.unreachable = pending;
         rep.error = status{errc::no_valid_pixels, "pixels with no usable source anywhere were left as they were"};
     }
-    rb.settle(rep, o);
     return rep;
 }
 
