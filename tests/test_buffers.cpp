@@ -357,6 +357,17 @@ TEST_CASE("K buffers: inputs refused as status values", "[buffers]") {
     v = f.views();
     v[2].color = v[0].color;
     CHECK(d.process(v).error.code() == errc::aliased_views);
+    // a mask over an earlier buffer's colour, as over a later one's: refused, nothing written
+    // (before, mask 2 over buffer 0 was taken, and the run wrote mask bytes into its colour)
+    std::vector<std::uint8_t> m0(36), m1(36);
+    const std::vector<float> colour0 = f.color[0];
+    std::vector<image_view<std::uint8_t>> masks{*make_image_view(m0.data(), 6, 6), *make_image_view(m1.data(), 6, 6),
+                                                *make_image_view(reinterpret_cast<std::uint8_t*>(f.color[0].data()), 6, 6)};
+    CHECK(d.process(f.views(), masks).error.code() == errc::aliased_views);
+    CHECK(f.color[0] == colour0);
+    masks[2] = *make_image_view(m1.data() + 0, 6, 6);
+    masks[1] = *make_image_view(reinterpret_cast<std::uint8_t*>(f.color[2].data()), 6, 6);
+    CHECK(d.process(f.views(), masks).error.code() == errc::aliased_views);
     v = f.views();
     v.resize(1);
     CHECK(d.process(v).error.code() == errc::invalid_argument);

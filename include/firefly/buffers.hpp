@@ -534,9 +534,11 @@ private:
                     return status{errc::aliased_views, "the buffers' views must not share memory"};
                 if (masks && i != j && views_may_overlap(masks[i], masks[j]))
                     return status{errc::aliased_views, "two masks share memory"};
-                if (masks && (views_may_overlap(masks[i], b[j].color) || (var && views_may_overlap(masks[i], b[j].variance))))
-                    return status{errc::aliased_views, "a mask shares memory with a buffer"};
             }
+        for (int i = 0; masks && i < k; ++i)  // every mask against every buffer, before it too
+            for (int j = 0; j < k; ++j)
+                if (views_may_overlap(masks[i], b[j].color) || (var && views_may_overlap(masks[i], b[j].variance)))
+                    return status{errc::aliased_views, "a mask shares memory with a buffer"};
         return ok_status();
     }
 

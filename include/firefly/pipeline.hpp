@@ -375,8 +375,8 @@ private:
         // Stage 1 (parallel): standard deviations, bound, ESD candidates, per half.
         detail::stage_clock clock(rep.stage_ms);
         stddev_bands(hb);
-        for (half_state& s : halves_) s.implausible.clear();
-        if (options_.find_implausible) mark_implausible(a, b);
+        for (half_state& s : halves_) s.implausible.clear(), s.dropped.clear();  // (a frame before
+        if (options_.find_implausible) mark_implausible(a, b);                   // may have left some)
         exec_.run(2, [&](std::size_t h) { detect_candidates(halves_[h], rep.half[h]); });
         if (options_.find_dropped) mark_dropped(a, b, rep);
         clock.lap(frame_report::candidates);
@@ -1170,7 +1170,12 @@ private:
                              L{b.color, b.variance, b.alpha, halves_[1].label.data()}};
         local_test_options lo = options_.local;
         lo.variance_scale *= rep.variance_calibration;
-        if (!local_test(halves[0], halves[1], lo, local_scratch_, local_result_, exec_).ok()) return;  // options checked
+        // (the options are checked, but a huge variance_scale times the calibration can pass
+        // DBL_MAX: then no local test, and none of an earlier frame's scratch read either)
+        if (!local_test(halves[0], halves[1], lo, local_scratch_, local_result_, exec_).ok()) {
+            for (auto& v : local_scratch_.rel_var) v.clear();
+            return;
+        }
         for (int h = 0; h < 2; ++h) {
             half_state& s = halves_[h];
             s.order.resize(rep.half[h].outliers);  // candidates past the ESD's count are not outliers
