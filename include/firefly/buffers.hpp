@@ -668,11 +668,12 @@ private:
         p.rel_var[s] = std::numeric_limits<double>::quiet_NaN();
         if (has_var) {
             const int nv = b.variance.channels();
-            for (int c = 0; c < nv; ++c) {  // every channel, as the colour's (alpha's too)
+            for (int c = 0; c < nv; ++c) {  // every channel checked, as the colour's (alpha's too)
                 const double v = b.variance.load(x, y, c);
                 fin += v - v;
+                if (c < ncol) sd += std::sqrt((std::max)(v, 0.0));
             }
-            for (int c = 0; c < ncol; ++c) sd += std::sqrt((std::max)(b.variance.load(x, y, nv == 1 ? 0 : c), 0.0));
+            if (nv == 1) sd *= ncol;  // one variance for every colour channel (exact: ncol <= 3)
             const double rel = (sd / ncol) / std::fabs(p.level[s]);
             if (p.level[s] != 0 && std::isfinite(rel)) p.rel_var[s] = rel * rel;
         }

@@ -375,8 +375,9 @@ private:
         // Stage 1 (parallel): standard deviations, bound, ESD candidates, per half.
         detail::stage_clock clock(rep.stage_ms);
         stddev_bands(hb);
-        for (half_state& s : halves_) s.implausible.clear(), s.dropped.clear();  // (a frame before
-        if (options_.find_implausible) mark_implausible(a, b);                   // may have left some)
+        // (every frame: one before, with other options, may have left some)
+        for (half_state& s : halves_) s.implausible.clear(), s.dropped.clear();
+        if (options_.find_implausible) mark_implausible(a, b);
         exec_.run(2, [&](std::size_t h) { detect_candidates(halves_[h], rep.half[h]); });
         if (options_.find_dropped) mark_dropped(a, b, rep);
         clock.lap(frame_report::candidates);
@@ -496,7 +497,6 @@ private:
     void mark_dropped(const half_buffer<C, V, A>& a, const half_buffer<C, V, A>& b, frame_report& rep) {
         const half_buffer<C, V, A>* hb[2] = {&a, &b};
         const int w = a.color.width(), h = a.color.height();
-        for (half_state& s : halves_) s.dropped.clear();
         if (rep.half[0].ignored == 0 && rep.half[1].ignored == 0) return;
         const std::uint8_t* lab[2] = {halves_[0].label.data(), halves_[1].label.data()};
         auto black_at = [&](int x, int y) -> std::uint64_t {

@@ -140,6 +140,14 @@ inline void queue_neighbours(std::size_t p, int w, int h, int r, std::uint8_t wa
         }
 }
 
+// Moves next_ into list_ (sorted: memory order) and clears the queued flags.
+inline void advance(reconstruct_scratch& s) {
+    std::sort(s.next_.begin(), s.next_.end());
+    s.list_.swap(s.next_);
+    s.next_.clear();
+    for (const std::uint32_t q : s.list_) s.state_[q] &= static_cast<std::uint8_t>(~reconstruct_scratch::queued);
+}
+
 // After both phases left pixels pending: excluded and rebuilt pixels become sources (state
 // 0; the rebuilt ones are final), and list_ gets the pending pixels that now have one within
 // the kernel. False when there are none.
@@ -151,19 +159,8 @@ inline bool fallback_to_excluded(reconstruct_scratch& s, int w, int h, int r) {
         s.state_[p] = 0;
         queue_neighbours(p, w, h, r, 1, s);
     }
-    std::sort(s.next_.begin(), s.next_.end());
-    s.list_.swap(s.next_);
-    s.next_.clear();
-    for (const std::uint32_t q : s.list_) s.state_[q] &= static_cast<std::uint8_t>(~reconstruct_scratch::queued);
+    advance(s);
     return !s.list_.empty();
-}
-
-// Moves next_ into list_ (sorted: memory order) and clears the queued flags.
-inline void advance(reconstruct_scratch& s) {
-    std::sort(s.next_.begin(), s.next_.end());
-    s.list_.swap(s.next_);
-    s.next_.clear();
-    for (const std::uint32_t q : s.list_) s.state_[q] &= static_cast<std::uint8_t>(~reconstruct_scratch::queued);
 }
 
 }  // namespace detail
