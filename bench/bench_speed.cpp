@@ -110,6 +110,10 @@ const frame_data* frame_of(const std::string& scene, int w, int h) {
         if (!cycles_tiled(w, h, *d)) d.reset();
     } else if (scene == "no_bucket") {
         *d = simulated("failed_bucket", w, h, true);
+    } else if (scene == "black_half") {  // half A written black all over: every pixel a lone black
+        *d = simulated("failed_bucket", w, h, true);
+        std::fill(d->col[0].begin(), d->col[0].end(), 0.0f);
+        std::fill(d->var[0].begin(), d->var[0].end(), 0.0f);
     } else {
         *d = simulated(scene, w, h, false);
     }
@@ -530,6 +534,7 @@ int register_all() {
     add_frame("no_bucket", k2, false, false, false);
     add_frame("dropped_bucket", k2, false, false, false);  // the failed bucket written black
     add_frame("garbage_bucket", k2, false, false, false);  // the failed bucket holding 1e30
+    add_frame("black_half", k2, false, false, false);      // a whole half written black
     add_frame("dense30", k2, false, true, true);
     for (unsigned n : {1u, 2u})
         benchmark::RegisterBenchmark(("one_half/stddev/caustics/" + k2.label() + "/threads:" + std::to_string(n)).c_str(),

@@ -245,6 +245,51 @@ TEST_CASE("find_dropped keeps its promise on exchangeable buffers", "[dropped][c
             }
 }
 
+// Every tested pair's p-value is the one of its window's counts, counted pixel by pixel here:
+// the strip of rows slid down each band (dropped_band) and the column sums give the same
+// integers as the window itself, at frame edges, band edges and frames narrower or shorter
+// than the window, for lone blacks and several buffers black (K = 2 to 64, wide masks past 8).
+TEST_CASE("find_dropped: each pair's p-value is its window's, counted directly", "[dropped]") {
+    struct shape { int w, h, k, most; double rate; };
+    for (const shape& f : {shape{70, 77, 2, 1, 0.3}, shape{5, 40, 2, 1, 0.9}, shape{33, 3, 3, 2, 0.5},
+                           shape{1, 1, 2, 1, 1.0}, shape{64, 66, 8, 3, 0.25}, shape{40, 35, 9, 8, 0.4},
+                           shape{31, 70, 64, 63, 0.6}, shape{50, 50, 4, 1, 1.0}}) {
+        const std::vector<std::uint64_t> black = null_black_map(f.w, f.h, f.k, f.most, f.rate, 17u + static_cast<std::uint32_t>(f.k));
+        dropped_scratch s;
+        std::vector<dropped_pixel> found;
+        const std::size_t tested = find_dropped_masks(f.w, f.h, f.k, 0.05, [&](int x, int y) { return black[pixel(x, y, f.w)]; },
+                                                      s, executor::threads(2), found);
+        std::vector<double> got(black.size() * static_cast<std::size_t>(f.k), 1.0);  // 1: no such pair (log p <= 0)
+        for (const auto& row : s.rows)
+            for (const dropped_pixel& d : row) got[d.pixel * static_cast<std::size_t>(f.k) + static_cast<std::size_t>(d.buffer)] = d.log_p;
+        std::size_t pairs = 0, wrong = 0;
+        const int r = detail::dropped_radius;
+        for (int y = 0; y < f.h; ++y)
+            for (int x = 0; x < f.w; ++x) {
+                const std::uint64_t m = black[pixel(x, y, f.w)];
+                if (m == 0) continue;
+                int n = 0, blacks = -detail::blacks_in(m), a[64] = {};
+                for (int j = std::max(0, y - r); j <= std::min(f.h - 1, y + r); ++j)
+                    for (int i = std::max(0, x - r); i <= std::min(f.w - 1, x + r); ++i) {
+                        const std::uint64_t q = black[pixel(i, j, f.w)];
+                        n += q != 0;
+                        blacks += detail::blacks_in(q);
+                        for (int b = 0; b < f.k; ++b) a[b] += static_cast<int>((q >> b) & 1u);
+                    }
+                for (int b = 0; b < f.k; ++b) {
+                    if (!((m >> b) & 1u)) continue;
+                    const double want = detail::window_log_p(n - 1, a[b] - 1, blacks, f.k, s);
+                    ++pairs;
+                    wrong += !(got[pixel(x, y, f.w) * static_cast<std::size_t>(f.k) + static_cast<std::size_t>(b)] == want);
+                }
+            }
+        INFO(f.w << "x" << f.h << " k " << f.k);
+        CHECK(tested == pairs);
+        CHECK(wrong == 0);
+        CHECK(pairs > 0);
+    }
+}
+
 TEST_CASE("find_dropped: the 8 flips and transposes and executors give the same pixels", "[dropped]") {
     const int w = 70, h = 45;
     std::vector<std::uint8_t> lone = null_lone_map(w, h, 2, 0.3, 9u);

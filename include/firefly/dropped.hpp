@@ -183,54 +183,86 @@ inline double window_log_p(int n, int c, int blacks, int k, const dropped_scratc
     return log_binomial_upper_tail(n, c, static_cast<double>(blacks) / (static_cast<double>(k) * n), s.log_factorial);
 }
 
-// The p-values of every (partly black pixel, black buffer) of row y: black[p] is the mask of
-// the buffers black at p (0: none, or not partly black), r the window's radius.
+// The counts of a vertical strip of rows, per column: the partly black pixels, their black
+// buffers, and per buffer the pixels where it is black. Slid down a band of rows (one row in,
+// one out), so a window's counts cost its width, not its area: a half written black all over
+// is as cheap a pixel as a lone black.
 template <class Mask>
-void dropped_row(const Mask* black, int w, int h, int y, int r, int k, const dropped_scratch& s,
+class strip_counts {
+public:
+    void reset(int w, int k) {
+        w_ = w;
+        lit_.assign(static_cast<std::size_t>(w), 0);
+        blacks_.assign(static_cast<std::size_t>(w), 0);
+        of_.assign(static_cast<std::size_t>(w) * static_cast<std::size_t>(k), 0);
+    }
+    // Row `row` of masks into the strip (sign 1) or out of it (sign -1).
+    void add(const Mask* row, int sign) noexcept {
+        for (int x = 0; x < w_; ++x) {
+            const Mask m = row[x];
+            if (m == 0) continue;
+            lit_[static_cast<std::size_t>(x)] += sign;
+            blacks_[static_cast<std::size_t>(x)] += sign * blacks_in(m);
+            for (Mask rest = m; rest != 0; rest = static_cast<Mask>(rest & (rest - 1)))
+                of_[column(lowest_bit(rest), x)] += sign;
+        }
+    }
+    // Columns [i0, i1]: the window's partly black pixels, their black buffers, and buffer b's.
+    int lit(int i0, int i1) const noexcept { return sum(lit_.data(), i0, i1); }
+    int blacks(int i0, int i1) const noexcept { return sum(blacks_.data(), i0, i1); }
+    int of(int b, int i0, int i1) const noexcept { return sum(&of_[column(b, 0)], i0, i1); }
+
+private:
+    static int sum(const int* v, int i0, int i1) noexcept {
+        int n = 0;
+        for (int i = i0; i <= i1; ++i) n += v[i];
+        return n;
+    }
+    std::size_t column(int b, int x) const noexcept {
+        return static_cast<std::size_t>(b) * static_cast<std::size_t>(w_) + static_cast<std::size_t>(x);
+    }
+    int w_ = 0;
+    std::vector<int> lit_, blacks_, of_;
+};
+
+// The p-values of every (partly black pixel, black buffer) of row y into `row`, from the strip
+// of rows [y - r, y + r] (counted in `strip`): black[p] is the mask of the buffers black at p
+// (0: none, or not partly black), r the window's radius.
+template <class Mask>
+void dropped_row(const Mask* black, int w, int y, int r, int k, const strip_counts<Mask>& strip, const dropped_scratch& s,
                  std::vector<dropped_pixel>& row) {
     row.clear();
     const Mask* here = black + static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
-    int a[64];
+    std::size_t pairs = 0;  // reserved at once: a row black all over grows no vector step by step
+    for (int x = 0; x < w; ++x) pairs += static_cast<std::size_t>(blacks_in(here[x]));
+    row.reserve(pairs);
     for (int x = 0; x < w; ++x) {
         const Mask m = here[x];
         if (m == 0) continue;
-        int n = 0, blacks = 0;  // partly black pixels in the window; the others' black buffers
-        for (Mask rest = m; rest != 0; rest = static_cast<Mask>(rest & (rest - 1))) a[lowest_bit(rest)] = 0;
-        const bool lone = (m & (m - 1)) == 0;  // one buffer black here: the common case
-        const int only = lowest_bit(m);
-        for (int j = (std::max)(0, y - r); j <= (std::min)(h - 1, y + r); ++j) {
-            const Mask* l = black + static_cast<std::size_t>(j) * static_cast<std::size_t>(w);
-            const int i0 = (std::max)(0, x - r), i1 = (std::min)(w - 1, x + r);
-            if (lone) {  // branch-free: a 0 mask adds nothing; several buffers: counted apart
-                int nn = 0, aa = 0;
-                Mask several = 0;
-                for (int i = i0; i <= i1; ++i) {
-                    nn += l[i] != 0;
-                    aa += static_cast<int>((l[i] >> only) & 1u);
-                    several = static_cast<Mask>(several | (l[i] & static_cast<Mask>(l[i] - 1)));
-                }
-                n += nn, a[only] += aa, blacks += nn;
-                if (several != 0)
-                    for (int i = i0; i <= i1; ++i) blacks += blacks_in(l[i]) - (l[i] != 0);
-                continue;
-            }
-            for (int i = i0; i <= i1; ++i) {
-                if (l[i] == 0) continue;
-                ++n;
-                blacks += blacks_in(l[i]);
-                for (Mask rest = m; rest != 0; rest = static_cast<Mask>(rest & (rest - 1))) {
-                    const int b = lowest_bit(rest);
-                    a[b] += static_cast<int>((l[i] >> b) & 1u);
-                }
-            }
-        }
-        blacks -= blacks_in(m);
+        const int i0 = (std::max)(0, x - r), i1 = (std::min)(w - 1, x + r);
+        const int n = strip.lit(i0, i1), blacks = strip.blacks(i0, i1) - blacks_in(m);  // the others' black buffers
         const std::uint32_t p = static_cast<std::uint32_t>(static_cast<std::size_t>(y) * static_cast<std::size_t>(w) +
                                                            static_cast<std::size_t>(x));
         for (Mask rest = m; rest != 0; rest = static_cast<Mask>(rest & (rest - 1))) {
             const int b = lowest_bit(rest);
-            row.push_back({p, b, window_log_p(n - 1, a[b] - 1, blacks, k, s)});
+            row.push_back({p, b, window_log_p(n - 1, strip.of(b, i0, i1) - 1, blacks, k, s)});
         }
+    }
+}
+
+// Rows [y0, y1) of dropped_row's p-values into s.rows: the strip slid down the band.
+template <class Mask>
+void dropped_band(const Mask* black, int w, int h, int y0, int y1, int r, int k, dropped_scratch& s) {
+    strip_counts<Mask> strip;
+    strip.reset(w, k);
+    const auto line = [&](int y) { return black + static_cast<std::size_t>(y) * static_cast<std::size_t>(w); };
+    for (int j = (std::max)(0, y0 - r); j <= (std::min)(h - 1, y0 + r); ++j) strip.add(line(j), 1);
+    for (int y = y0; y < y1; ++y) {
+        if (y > y0) {
+            if (y + r < h) strip.add(line(y + r), 1);
+            if (y - r - 1 >= 0) strip.add(line(y - r - 1), -1);
+        }
+        dropped_row(black, w, y, r, k, strip, s, s.rows[static_cast<std::size_t>(y)]);
     }
 }
 
@@ -247,11 +279,19 @@ std::size_t find_dropped_in(const Mask* black, int w, int h, int k, double alpha
             s.log_factorial[static_cast<std::size_t>(i)] = s.log_factorial[static_cast<std::size_t>(i - 1)] + std::log(static_cast<double>(i));
     }
     s.rows.resize(static_cast<std::size_t>(h));
-    exec.run(static_cast<std::size_t>(h), [&](std::size_t y) { dropped_row(black, w, h, static_cast<int>(y), r, k, s, s.rows[y]); });
+    constexpr int band = 32;  // rows a task slides its strip down (2 r of them read to start it)
+    exec.run(static_cast<std::size_t>((h + band - 1) / band), [&](std::size_t i) {
+        const int y0 = static_cast<int>(i) * band;
+        dropped_band(black, w, h, y0, (std::min)(h, y0 + band), r, k, s);
+    });
     std::size_t tested = 0;
     for (const auto& row : s.rows) tested += row.size();
     if (tested == 0) return 0;
     const double level = std::log(alpha) - std::log(static_cast<double>(tested));
+    std::size_t found = 0;
+    for (const auto& row : s.rows)
+        for (const dropped_pixel& d : row) found += d.log_p <= level;
+    out.reserve(found);
     for (const auto& row : s.rows)
         for (const dropped_pixel& d : row)
             if (d.log_p <= level) out.push_back(d);
