@@ -336,8 +336,9 @@ TEST_CASE("the expected radiance is the mean the samples converge to, with firef
     s.firefly_energy = 1.0 / 16;
     const sim::frame f = sim::simulate(s);
     CHECK(mean_ratio(f, [](std::size_t) { return true; }) == Approx(1.0).epsilon(0.005));
-    // Caustics at 2 samples a half and a rate of 0.99: in a core every sample is the caustic's
-    // (p per sample 2.3 before it was taken as at most 1; the frame read 0.56 of its expectation).
+    // Caustics at 2 samples a half and a rate of 0.99: in a core nine samples in ten are the
+    // caustic's (p per sample 0.9; under the Poisson form once 2.3, and before it was taken as
+    // at most 1 the frame read 0.56 of its expectation).
     s.effects = sim::caustics;
     s.spp = 2;
     s.caustic_pixel_rate = 0.99;
@@ -810,6 +811,112 @@ TEST_CASE("a bright region off the geometry is background; NaN rates; counts pas
     }
     CHECK(lost == 0);
     CHECK(n_more > n_fewer);
+}
+
+TEST_CASE("the share of pixels hit is the rate asked, at 2 samples a half too", "[sim][scenes]") {
+    // The per-sample probability was the Poisson form -log(1 - rate) / n: at 2 samples a half
+    // 0.325 of the pixels were hit for 0.30, and every pixel for 0.90.
+    for (const auto& [spp, rate] : {std::pair<int, double>{2, 0.30}, {2, 0.90}, {4, 0.30}, {16, 0.90}}) {
+        sim::scene s = sim::named_scene("flat", 200, 150, 4);
+        s.effects = sim::fireflies;
+        s.spp = spp;
+        s.firefly_pixel_rate = rate;
+        const sim::frame f = sim::simulate(s);
+        INFO("spp " << spp << " rate " << rate);
+        // 30,000 pixels: the share's sd is at most 0.003
+        CHECK(std::fabs(hit_share(f, 0) - rate) < 0.012);
+        CHECK(std::fabs(hit_share(f, 1) - rate) < 0.012);
+    }
+}
+
+TEST_CASE("a highlight is brighter than what it lies on, never negative light", "[sim][scenes]") {
+    // In `production` the negative effect's factor -0.2 fell on highlight spots too (2% of its
+    // highlight pixels expected below 0); on a ramp or a line brighter than a spot, the spot's
+    // pixel was a highlight all the same (null scenes: 12.5 where the pixel was 29.3).
+    for (const char* name : {"production", "null_k4_spp64", "null_k1_spp4", "highlights"}) {
+        sim::scene s = sim::named_scene(name, 384, 256, 1);
+        const sim::frame f = sim::simulate(s);
+        s.effects &= ~static_cast<std::uint32_t>(sim::highlights | sim::wide_highlight);
+        const sim::frame bare = sim::simulate(s);
+        std::size_t spots = 0, negative = 0, darker = 0;
+        for (std::size_t i = 0; i < f.pixels(); ++i) {
+            if (!f.highlight[i] || bare.highlight[i]) continue;  // (a bright region's are the same)
+            ++spots;
+            negative += !(luminance(f.expected, i) > 0);
+            darker += !(luminance(f.expected, i) > luminance(bare.expected, i));
+        }
+        INFO(name);
+        CHECK(spots > 50);
+        CHECK(negative == 0);
+        CHECK(darker == 0);
+    }
+}
+
+TEST_CASE("round-off variances below 0 fall on ordinary pixels; a dropped bucket holds no bad sample", "[sim][scenes]") {
+    // The negative effect wrote -1e-7 over the green variance of firefly and highlight pixels
+    // too (variances up to 26), which hid part of what the truth says is there.
+    const sim::frame f = sim::simulate(sim::named_scene("production", 512, 270, 5));
+    std::size_t written = 0, on_truth = 0;
+    for (int h = 0; h < 2; ++h)
+        for (std::size_t i = 0; i < f.pixels(); ++i)
+            if (f.variance[static_cast<std::size_t>(h)][i * 3 + 1] < 0) {
+                ++written;
+                on_truth += f.highlight[i] || f.firefly(h, i) != 0;
+            }
+    CHECK(written > 100);
+    CHECK(on_truth == 0);
+    // A bucket written black after a NaN sample was drawn there: no sample of it is kept, so
+    // none is bad (44 of its 1,024 pixels said non-finite over finite zeros).
+    sim::scene d = sim::named_scene("dropped_bucket", 256, 256, 2);
+    d.effects |= sim::nonfinite;
+    d.nonfinite_pixel_rate = 0.05;
+    const sim::frame g = sim::simulate(d);
+    std::size_t black = 0, said_bad = 0;
+    for (std::size_t i = 0; i < g.pixels(); ++i) {
+        const bool zero = g.color[0][i * 3] == 0 && g.color[0][i * 3 + 1] == 0 && g.color[0][i * 3 + 2] == 0;
+        black += zero;
+        said_bad += zero && g.bad(0, i);
+    }
+    CHECK(black > 500);
+    CHECK(said_bad == 0);
+}
+
+TEST_CASE("options the simulator cannot draw: no light of them, never NaN; no frame, no work", "[sim][errors]") {
+    const double inf = std::numeric_limits<double>::infinity(), nan = std::numeric_limits<double>::quiet_NaN();
+    // A NaN or infinite firefly energy gave NaN in every expected value (inf / inf).
+    for (const auto& [lo, hi] : {std::pair<double, double>{nan, 0}, {1, inf}, {inf, inf}, {-5, 10}}) {
+        sim::scene s = sim::named_scene("sparse_fireflies", 32, 24, 1);
+        s.firefly_energy = lo;
+        s.firefly_energy_max = hi;
+        const sim::frame f = sim::simulate(s);
+        std::size_t bad = 0;
+        for (float v : f.expected) bad += !std::isfinite(v);
+        for (int h = 0; h < 2; ++h)
+            for (float v : f.color[static_cast<std::size_t>(h)]) bad += !std::isfinite(v);
+        INFO("energy " << lo << " .. " << hi);
+        CHECK(bad == 0);
+    }
+    // A spread whose square underflows or overflows: the gamma law's shape was inf or 0, and
+    // every pixel NaN.
+    for (const double noise : {1e-160, 1e-300, 1e200, inf, nan})
+        for (const sim::distribution d : {sim::distribution::gamma, sim::distribution::lognormal}) {
+            sim::scene s = sim::named_scene("flat", 16, 16, 1);
+            s.noise = noise;
+            s.samples = d;
+            const sim::frame f = sim::simulate(s);
+            std::size_t bad = 0;
+            for (float v : f.color[0]) bad += !std::isfinite(v);
+            INFO("noise " << noise);
+            CHECK(bad == 0);
+        }
+    // No pixel: no ramp of INT_MAX columns built (36 s, then bad_alloc), and the bucket's far
+    // corner INT_MAX + side no signed overflow.
+    sim::scene e = sim::named_scene("failed_bucket", INT_MAX, 0, 1);
+    e.effects |= sim::log_gradient;
+    e.bucket_size = 1;
+    e.bucket_x = 1;
+    const sim::frame f = sim::simulate(e);
+    CHECK(f.color[0].empty());
 }
 
 TEST_CASE("metrics: NaN output is no detection; made worse is judged by the relMSE term", "[sim][metrics]") {

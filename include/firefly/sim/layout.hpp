@@ -7,6 +7,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
 #include <cstdint>
 #include <vector>
@@ -51,18 +52,25 @@ inline int clamped_int(double v, int lo, int hi) noexcept {
 }
 
 // Mean of the firefly ratio: U[0.5, 1.5) x E, or log-uniform on [E, E_max).
+// An energy that is not a finite positive number (NaN, infinite, 0 or below) draws no firefly
+// light: a ratio of 0, in the draws and in the expectation alike.
+inline bool usable_energy(double e) noexcept { return e > 0 && e <= DBL_MAX; }
 inline double mean_ratio(const scene& sc) noexcept {
     const double lo = sc.firefly_energy, hi = sc.firefly_energy_max;
-    return hi > lo && lo > 0 ? (hi - lo) / std::log(hi / lo) : lo;
+    if (!usable_energy(lo)) return 0.0;
+    return hi > lo && usable_energy(hi) ? (hi - lo) / std::log(hi / lo) : lo;
 }
 inline double draw_ratio(const scene& sc, counter_rng& r) noexcept {
     const double lo = sc.firefly_energy, hi = sc.firefly_energy_max;
-    return hi > lo && lo > 0 ? lo * std::exp(r.uniform() * std::log(hi / lo)) : lo * (0.5 + r.uniform());
+    if (!usable_energy(lo)) return 0.0;
+    return hi > lo && usable_energy(hi) ? lo * std::exp(r.uniform() * std::log(hi / lo)) : lo * (0.5 + r.uniform());
 }
-// Per-sample probability from a share of pixels hit among n samples (Poisson: 1 - e^{-np}).
+// Per-sample probability from a share of pixels hit among n samples: 1 - (1 - p)^n = rate,
+// exactly (the Poisson form -log(1 - rate) / n overshot it, 0.325 of pixels hit for 0.30 at
+// 2 samples, and passed 1 at high rates).
 inline double rate_to_probability(double rate, double n) noexcept {
     if (!(rate > 0)) return 0.0;  // NaN too: the sampling takes it as 0, so must the expectation
-    return -std::log1p(-std::clamp(rate, 0.0, 0.99)) / n;
+    return -std::expm1(std::log1p(-std::clamp(rate, 0.0, 0.99)) / n);
 }
 
 class layout {
@@ -77,7 +85,7 @@ public:
                                                : rate_to_probability(sc.firefly_pixel_rate, n);
         if (fx_ & (highlights | wide_highlight)) place_spots();
         if (fx_ & caustics) place_caustics();
-        if (fx_ & log_gradient)
+        if ((fx_ & log_gradient) && h_ > 0)  // (a frame of no pixel reads no ramp)
             for (int x = 0; x < w_; ++x)
                 log_ramp_.push_back(0.02 * std::pow(1000.0, w_ > 1 ? static_cast<double>(x) / (w_ - 1) : 0.5));
         const double m = (std::min)(w_, h_);
@@ -86,8 +94,8 @@ public:
         const int side = clamped_int(std::round(sc.bucket_size * w_), 0, (std::max)(w_, h_));
         bx_ = clamped_int(sc.bucket_x * w_, -w_, w_);
         by_ = clamped_int(sc.bucket_y * h_, -h_, h_);
-        bx1_ = bx_ + side;
-        by1_ = by_ + side;
+        bx1_ = static_cast<int>((std::min<std::int64_t>)(std::int64_t{bx_} + side, w_));  // (in int64: INT_MAX + side)
+        by1_ = static_cast<int>((std::min<std::int64_t>)(std::int64_t{by_} + side, h_));
     }
 
     double firefly_probability() const noexcept { return p_ff_; }  // per sample, on the geometry
@@ -119,17 +127,25 @@ public:
         if (fx_ & caustics) caustic(p, x, y, b);
         if ((fx_ & bright_region) && region_.in_box(x + 0.5, y + 0.5) && region_.distance(x + 0.5, y + 0.5) <= region_.r) {
             p.touched |= bright_region;
-            p.highlight = p.cov >= 1.0;  // as the spots: off the geometry it is background
-            b = sc_.region_radiance * sc_.base;
+            const double lit = sc_.region_radiance * sc_.base;
+            // as the spots: off the geometry it is background, and a highlight only above
+            // what it covers
+            p.highlight = p.cov >= 1.0 && lit > b;
+            b = lit;
             s = sc_.region_noise;
         }
         if (!spots_.empty() && spots_[i]) {
             p.touched |= spots_[i];
-            p.highlight = true;
-            b = sc_.highlight_radiance * sc_.base;
+            // A spot's light is its own (a lamp's reflection), whatever lies under it; where a
+            // ramp or a line is brighter still (calibration scenes: a line of 29 under a spot
+            // of 12.5) it is no highlight, just a pixel of another level.
+            const double lit = sc_.highlight_radiance * sc_.base;
+            p.highlight = lit > b;
+            b = lit;
             s = sc_.highlight_noise;
         }
-        if ((fx_ & negative) && mix64(sc_.seed ^ (i * golden + negative_pixels)) % 50 == 0) {
+        // (not on a highlight: a highlight of negative light is none)
+        if ((fx_ & negative) && !p.highlight && mix64(sc_.seed ^ (i * golden + negative_pixels)) % 50 == 0) {
             p.sign = -0.2;  // the same pixels in every buffer
             p.touched |= negative;
         }

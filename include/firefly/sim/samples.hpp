@@ -132,6 +132,11 @@ struct normal_constants {
 inline sample_moments draw_samples(counter_rng& r, distribution d, double s, std::uint64_t m,
                                    const normal_constants* nc = nullptr) noexcept {
     if (m == 0) return {0.0, 0.0};
+    // A spread whose square is not a normal double (below 1e-150, NaN too) is none at float
+    // precision; one past 1e150 is held there (the gamma law's shape 1 / s^2 was inf or 0,
+    // and every pixel NaN).
+    if (!(s >= 1e-150)) s = 0;
+    else if (!(s <= 1e150)) s = 1e150;
     if (d == distribution::normal || !(s > 0)) {
         const normal_constants local = nc && nc->m == m ? normal_constants() : normal_constants(m);
         const normal_constants& k = nc && nc->m == m ? *nc : local;

@@ -177,7 +177,11 @@ inline std::uint32_t simulate_pixel(const scene& sc, const pixel_model& p, std::
 inline std::uint32_t damage_pixel(const pixel_model& p, int x, std::size_t i, int b, row_events& ev, buffers& out) {
     std::uint32_t touched = 0;
     const bool covered = p.cov > 0;
-    if (row_events::at(ev.negative_variance, ev.next_neg, x) && covered) {
+    // A renderer's E[x^2] - E[x]^2 rounds below 0 where the spread is below float precision:
+    // an ordinary pixel's green variance written -1e-7, never a highlight's or a firefly's
+    // (whose variance is nowhere near round-off, and whose truth must stay what it says).
+    const bool hit = !out.firefly_energy[b].empty() && out.firefly_energy[b][i] != 0;
+    if (row_events::at(ev.negative_variance, ev.next_neg, x) && covered && !p.highlight && !hit) {
         out.variance[b][i * 3 + 1] = -1e-7f;
         touched |= negative;
     }
@@ -195,6 +199,7 @@ inline std::uint32_t damage_pixel(const pixel_model& p, int x, std::size_t i, in
     } else if (p.dropped && b == 0) {
         for (int c = 0; c < 3; ++c) out.color[b][i * 3 + c] = out.variance[b][i * 3 + c] = 0.0f;
         if (!out.firefly_energy[b].empty()) out.firefly_energy[b][i] = 0.0f;  // no sample was kept
+        if (!out.nonfinite[b].empty()) out.nonfinite[b][i] = 0;                // nor a bad one
     } else if (p.garbage && b == 0) {
         for (int c = 0; c < 3; ++c) out.color[b][i * 3 + c] = 1e30f;
         out.nonfinite[b][i] = 1;

@@ -20,7 +20,7 @@ enum effect : std::uint32_t {
     black_background = 1u << 6,  // no geometry outside a large disk: colour and variance 0
     alpha_coverage = 1u << 7,    // alpha: 1 on the geometry, 0 outside, fractional on the rim
     nonfinite = 1u << 8,         // a few NaN / Inf samples
-    negative = 1u << 9,          // some negative samples, and variances of -0 round-off
+    negative = 1u << 9,          // some negative pixels, and variances of round-off below 0 (-1e-7)
     log_gradient = 1u << 10,     // base radiance spans three decades across the frame (x0.02 .. x20)
     caustics = 1u << 11,         // a few bright caustic blobs and streaks with a firefly rate of their own
     failed_bucket = 1u << 12,    // a square block of NaN colour and variance in buffer 0 only
