@@ -157,6 +157,7 @@ constexpr void for_each_frame_field(F&& f) {
     f("both_outliers", &R::both_outliers);
     f("variance_calibration", &R::variance_calibration);
     f("single_level", &R::single_level);
+    f("single_log_level", &R::single_log_level);
     f("lambdas_computed", &R::lambdas_computed);
     f("scratch_bytes", &R::scratch_bytes);
     f("stage_ms", &R::stage_ms);  // a timing: differs from run to run

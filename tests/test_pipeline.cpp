@@ -1187,6 +1187,68 @@ TEST_CASE("pipeline: a pixel on a line whose other half drew as low as the backg
     CHECK(rebuilt(where::no_line, 5.0f));
 }
 
+// A pixel that is a global outlier in half B (20, its variance 25) and only a local flag in
+// half A (20 rho, a small variance): a pair, which decide_pairs judges by its own p-values.
+// The frame's decision also took A's local p-value into its family and, where refused,
+// marked A consistent: A kept 108 beside B's 20 (default options), and under `agree` with a
+// strict excess limit B was "rebuilt from the other half", from A's 108.
+TEST_CASE("a local flag paired with the other half's outlier is decided once, as a pair", "[pipeline][highlights]") {
+    sim::scene sc = sim::named_scene("flat", 64, 64, 11);
+    sc.spp = 16;
+    sc.samples = sim::distribution::gamma;
+    sc.noise = 1.0;  // exponential samples around 0.5
+    for (const bool strict : {false, true})
+        for (const double rho : {5.5, 6.0}) {
+            halves hv(sim::simulate(sc));
+            hv.set(1, 30, 30, 10.0f, 25.0f / 4);
+            hv.set(0, 30, 30, static_cast<float>(10.0 * rho), 1.0f / 64);
+            detector_options o;
+            if (strict) {
+                o.highlight.rule = highlight_rule::agree;
+                o.highlight.min_excess_z = 10;
+            }
+            detector d(o);
+            const frame_report r = hv.process(d);
+            INFO((strict ? "agree, min_excess_z 10" : "defaults") << ", rho " << rho << ": A " << hv.col(0, 30, 30) << " B "
+                                                                     << hv.col(1, 30, 30));
+            REQUIRE(r.ok());
+            CHECK(hv.col(0, 30, 30) <= 10.5f);  // A's firefly rebuilt (from B, or from around)
+            CHECK(hv.col(1, 30, 30) <= 10.0f);  // and never copied into B
+            CHECK((hv.mask[0][hv.at(30, 30)] & (mask_bits::firefly | mask_bits::consistent)) == mask_bits::firefly);
+        }
+}
+
+// A frame of fewer rows (or columns) than the calibration's lattice step: no row was on the
+// lattice, so no ratio was taken and the factor was 1, unsaid, whatever the variance's
+// convention (70000 x 1: step 2, and row 0 is not at step / 2 from an edge).
+TEST_CASE("the variance convention does not matter on a frame of one row or one column", "[pipeline][invariant]") {
+    for (const auto& [w, h] : {std::pair<int, int>{70000, 1}, {1, 70000}, {300000, 2}}) {
+        const sim::scene s = sim::named_scene("sparse_fireflies", w, h, 3);
+        halves base(sim::simulate(s));
+        detector d;
+        const frame_report r0 = d.process(base.h[0], base.h[1]);
+        sim::frame f = sim::simulate(s);
+        for (auto& v : f.variance)
+            for (auto& x : v) x *= 64.0f;
+        halves hv(std::move(f));
+        detector dk;
+        const frame_report r = dk.process(hv.h[0], hv.h[1]);
+        INFO(w << " x " << h << ": calibration " << r0.variance_calibration << " and, variance x 64, " << r.variance_calibration);
+        CHECK(r0.variance_calibration == Approx(1.0).epsilon(0.05));  // the simulator's variance is of the mean
+        CHECK(r.variance_calibration == r0.variance_calibration / 64);
+        CHECK(r.half[0].fireflies == r0.half[0].fireflies);
+        for (int half = 0; half < 2; ++half)
+            CHECK(std::memcmp(hv.f.color[half].data(), base.f.color[half].data(), base.f.color[half].size() * 4) == 0);
+    }
+    int sx = 0, sy = 0;
+    detail::lattice_steps(70000.0 / 16384, 70000, 1, sx, sy);
+    CHECK((sx == 4 && sy == 1));
+    detail::lattice_steps(70000.0 / 16384, 1, 70000, sx, sy);
+    CHECK((sx == 1 && sy == 4));
+    detail::lattice_steps(1e6 / 16384, 1000, 1000, sx, sy);  // a square frame: one step, as ever
+    CHECK((sx == 7 && sy == 7));
+}
+
 // The whole detector (detection, highlight rules, both rebuilds, the energy return) on frames
 // large enough that the variance calibration samples a lattice (above 4 x 16,384 pixels): it
 // was laid from one edge, so a flipped frame sampled other pixels (the Cycles caustics: factor

@@ -18,7 +18,11 @@
 // The kept set is then BH's set intersected with p <= cap, so the cap can only make the
 // procedure stricter. Independence across pixels is assumed (positive dependence, as
 // between neighbours that share a noise estimate, keeps the promise: Benjamini and
-// Yekutieli 2001). One pixel moves the threshold by at most one rank, alpha / m.
+// Yekutieli 2001). One pixel moves the threshold by at most one rank, alpha / m, but every
+// p-value between the two levels turns with it: where many flags sit at the margin, one
+// firefly far from them decides them all (20 equal local flags, none rebuilt without it and
+// all 20 with it), as step-up procedures do. The promise is this family's: the implausible
+// values, dropped pixels and pairs are decided at their own levels.
 //
 // p-values are carried as logarithms: a 1e30 firefly next to 1e-3 pixels has p far below
 // the smallest double.

@@ -103,9 +103,9 @@ struct local_test_options {
                                     // 16 values at 1 (measured as good as 48 at 2, 3x cheaper)
     int min_neighbours = 6;         // fewer usable neighbour values (2 per pixel): the pixel is
                                     // not tested (6: frame corners are, at radius 1)
-    double variance_scale = 1.0;    // turns the given variance into the variance of the half
-                                    // mean (1: it already is; the number of samples when the
-                                    // renderer stores the variance of the samples)
+    double variance_scale = 1.0;    // multiplies the given variance into the variance of the
+                                    // half mean (1: it already is; 1 / N when the renderer
+                                    // stores the variance of its N samples)
     bool spatial = true;            // also test each half against its neighbourhood's level
                                     // where that neighbourhood is homogeneous (q split evenly)
     double homogeneity = 0.01;      // level of the two homogeneity checks that gate it

@@ -81,8 +81,9 @@ struct detector_options {
     reconstruct_options reconstruction{};
     bool local_test = true;             // add the local, brightness-invariant test's flags
                                         // (local_test.hpp) to the global ESD's outliers
-    local_test_options local{};         // its variance_scale multiplies the frame's own
-                                        // calibration (leave 1 unless the convention is known)
+    local_test_options local{};         // its variance_scale multiplies the frame's own measured
+                                        // calibration (variance_calibration), which already
+                                        // finds the convention: leave it 1
     rebuild_source rebuild = rebuild_source::other_half;
     bool blend_spatial = true;          // other_half: blend in the spatial estimate (false:
                                         // the other half's value alone)
@@ -198,7 +199,8 @@ struct [[nodiscard]] frame_report {
     std::size_t both_outliers = 0;      // pixels that are outliers in both halves
     double variance_calibration = 1.0;  // variance -> variance of the mean (highlight rule)
     double single_level = 0.0;          // the largest p-value of a one-half firefly the frame's
-                                        // decision kept (fdr.hpp; 0: none kept)
+                                        // decision kept (fdr.hpp; 0: none kept, or below 1e-308)
+    double single_log_level = -HUGE_VAL;// its log, which does not underflow (-inf: none kept)
     std::size_t lambdas_computed = 0;   // lambda cache misses in this frame
     std::size_t scratch_bytes = 0;      // detector memory after this frame
     // Wall time of each stage, milliseconds (both halves): standard deviations, bound and
@@ -223,6 +225,22 @@ private:
     double* ms_;
     std::chrono::steady_clock::time_point last_;
 };
+
+// The steps of the calibration's lattice along x and y for `cells` = pixels / 16,384: the
+// same step on both axes (sqrt(cells)), except that an axis shorter than two steps takes a
+// point every other pixel at most and the long one the rest. One step for both left no row
+// of a frame of fewer rows than the step (a 70000 x 1 frame: no ratio, factor 1 unsaid).
+// At most one axis is that short (both: w h / 4 < cells = w h / 16384), so a transposed frame
+// gets the transposed steps.
+inline void lattice_steps(double cells, int w, int h, int& sx, int& sy) noexcept {
+    const int step = (std::max)(1, static_cast<int>(std::sqrt(cells)));
+    const int most_x = (std::max)(1, w / 2), most_y = (std::max)(1, h / 2);
+    sx = (std::min)(step, most_x);
+    sy = (std::min)(step, most_y);
+    auto rest = [cells](int other, int most) { return (std::min)((std::max)(1.0, cells / other), static_cast<double>(most)); };
+    if (sx < step) sy = static_cast<int>(rest(sx, most_y));
+    else if (sy < step) sx = static_cast<int>(rest(sy, most_x));
+}
 }  // namespace detail
 
 class detector {
@@ -656,13 +674,14 @@ private:
         const int nc = colour_channels(a.color.channels()), nv = a.variance.channels();
         calibration_.clear();
         const double cells = static_cast<double>(w) * static_cast<double>(hgt) / 16384.0;
-        const int step = (std::max)(1, static_cast<int>(std::sqrt(cells)));
-        auto on_lattice = [step](int v, int n) { return (std::min)(v, n - 1 - v) % step == step / 2; };
+        int sx = 1, sy = 1;
+        detail::lattice_steps(cells, w, hgt, sx, sy);
+        auto on_lattice = [](int v, int n, int step) { return (std::min)(v, n - 1 - v) % step == step / 2; };
         for (int y = 0; y < hgt; ++y) {
-            if (!on_lattice(y, hgt)) continue;
+            if (!on_lattice(y, hgt, sy)) continue;
             for (int x = 0; x < w; ++x) {
                 const std::size_t i = index(x, y, w);
-                if (!on_lattice(x, w) || lab[0][i] != valid_class || lab[1][i] != valid_class) continue;
+                if (!on_lattice(x, w, sx) || lab[0][i] != valid_class || lab[1][i] != valid_class) continue;
                 for (int c = 0; c < nc; ++c)
                     calibration_.add(a.color.load(x, y, c), b.color.load(x, y, c),
                                      a.variance.load(x, y, nv == 1 ? 0 : c), b.variance.load(x, y, nv == 1 ? 0 : c));
@@ -1012,23 +1031,30 @@ private:
     // whose other half is non-finite are decided as before.
     void frame_level(frame_report& rep) {
         frame_log_p_.clear();
+        // A pair (an outlier in both halves, a local flag among them) is decided by its own
+        // p-values (pair_log_p_) and the pair rule: its local flag's p-value counted twice in
+        // the family, and where refused, kept as consistent what decide_pairs rebuilt (a
+        // firefly left at 108 beside its other half's 20, or copied into the other half).
+        auto one_half = [&](int h, std::size_t j) {
+            const half_state& s = halves_[h];
+            return s.log_p[j] <= 0 && !(s.label[s.order[j]] & (highlight_bit | consistent_bit)) &&
+                   !(halves_[1 - h].label[s.order[j]] & outlier_bit);
+        };
         for (int h = 0; h < 2; ++h) {
-            half_state& s = halves_[h];
-            s.log_p.resize(rep.half[h].outliers, std::numeric_limits<double>::quiet_NaN());
+            halves_[h].log_p.resize(rep.half[h].outliers, std::numeric_limits<double>::quiet_NaN());
             for (std::size_t j = 0; j < rep.half[h].outliers; ++j)
-                if (s.log_p[j] <= 0 && !(s.label[s.order[j]] & (highlight_bit | consistent_bit)))
-                    frame_log_p_.push_back(s.log_p[j]);
+                if (one_half(h, j)) frame_log_p_.push_back(halves_[h].log_p[j]);
         }
         for (const double l : pair_log_p_)
             if (l <= 0) frame_log_p_.push_back(l);
         frame_level_ = bh_log_threshold(frame_log_p_, rep.half[0].valid + rep.half[1].valid, options_.alpha);
+        rep.single_log_level = frame_level_;
         rep.single_level = frame_level_ == -HUGE_VAL ? 0.0 : std::exp(frame_level_);
         for (int h = 0; h < 2; ++h) {
             half_state& s = halves_[h];
             for (std::size_t j = 0; j < rep.half[h].outliers; ++j) {
-                std::uint8_t& l = s.label[s.order[j]];
-                if (s.log_p[j] <= 0 && !(l & (highlight_bit | consistent_bit)) && !kept_by_frame(s.log_p[j])) {
-                    l |= consistent_bit;
+                if (one_half(h, j) && !kept_by_frame(s.log_p[j])) {
+                    s.label[s.order[j]] |= consistent_bit;
                     ++rep.half[h].frame_kept;
                 }
             }

@@ -12,7 +12,7 @@ from conftest import arrays_of, make_frame, same_bits
 HALF_FIELDS = ["pixels", "valid", "ignored", "nonfinite", "dropped", "implausible", "negative_variance", "median", "mad", "bound",
                "outliers", "local", "highlights", "consistent", "frame_kept", "fireflies", "repaired", "from_other_half", "unreachable", "phase1_rounds",
                "phase2_iterations", "final_change", "reconstruction"]
-FRAME_FIELDS = ["ok", "error", "both_outliers", "variance_calibration", "single_level", "lambdas_computed", "scratch_bytes", "stage_ms", "half"]
+FRAME_FIELDS = ["ok", "error", "both_outliers", "variance_calibration", "single_level", "single_log_level", "lambdas_computed", "scratch_bytes", "stage_ms", "half"]
 
 
 def public(obj):
