@@ -191,6 +191,11 @@ void add_buffer_configs(std::vector<config>& c, int k) {
         c.push_back({"mon_k" + K + "_m" + M, {}, [m](const firefly_peers::buffer_list& b, int w, int h, float* out) {
                          firefly_peers::median_of_means(b, static_cast<std::size_t>(w) * h, m, out);
                      }, ds});
+        // G-MoN: the binary variant (mean or median of means) at three thresholds, and the
+        // paper's adaptive one (a Gini-trimmed mean of the means; no threshold)
+        c.push_back({"agmon_k" + K + "_m" + M, {}, [m](const firefly_peers::buffer_list& b, int w, int h, float* out) {
+                         firefly_peers::agmon(b, static_cast<std::size_t>(w) * h, m, out);
+                     }, ds});
         for (double t : {0.1, 0.25, 0.4}) {
             if (m == 2 && t != 0.25) continue;  // two means: every threshold gives the mean
             char name[64];
@@ -494,6 +499,7 @@ void add_buffer_scenes(std::map<std::string, scene_data>& all, int w, int h) {
             buffer_half(b, 1, f);
             f.alpha = std::move(b.alpha);
             f.expected = std::move(b.expected);
+            f.firefly_expected = std::move(b.firefly_expected);
             f.highlight = std::move(b.highlight);
             f.touched = std::move(b.touched);
             s.buffers = std::move(b.color);

@@ -6,8 +6,10 @@
 //                    against ref = 2 x the 75th percentile of the 5x5 window's L. Above it,
 //                    it is an outlier when its variance is > 9x the window's largest, or
 //                    when L - 3 sd < ref; outliers are scaled down to ref.
-//   bcd_spikes       BCD spike removal (appleseed, LuxCore): 3x3 mean and sd per channel;
-//                    a channel beyond mean +- k sd replaces the pixel by the window's L1 medoid.
+//   bcd_spikes       BCD spike removal (SpikeRemovalFilter; appleseed, LuxCore): per channel,
+//                    the 3x3 window's mean and sample sd (n - 1), the window moved inward at
+//                    the borders so it always holds 9 pixels; a channel beyond mean +- k sd
+//                    replaces the pixel by the window's L1 medoid.
 //   nrd_clamp        NRD RELAX anti-firefly: the centre's luminance clamped to the min..max
 //                    of its eight neighbours' luminance.
 //   fixed_clamp      every channel clamped at a fixed value (a renderer's sample clamp).
@@ -75,7 +77,7 @@ inline void cycles_prefilter(const view& color, const view& variance) {
                 }
             std::sort(vals, vals + n);
             max_var += 1e-4f + 1e-5f;
-            const float ref = 2.0f * vals[static_cast<int>(n * 0.75f)] - 1e-5f;
+            const float ref = 2.0f * vals[static_cast<int>(static_cast<float>(n) * 0.75f)] - 1e-5f;
             const float L = mean3(color, x, y);
             float fac = 1.0f, var_fac = 1.0f;
             bool set_var = false;
@@ -103,44 +105,56 @@ inline void cycles_prefilter(const view& color, const view& variance) {
             }
 }
 
+// BCD's 3x3 window along one axis: its first index, moved inward at the borders so that a
+// border pixel's window holds 3 pixels too (fewer only when the image is narrower).
+inline int bcd_window_start(int x, int size) { return std::max(0, std::min(x - 1, size - 3)); }
+
+// BCD's spike test at (x, y): a channel farther than k sample standard deviations (n - 1)
+// from the mean of its window (nx x ny pixels from x0, y0; 3 x 3 but in a tiny image).
+inline bool bcd_is_spike(const view& color, int x, int y, float k) {
+    const int x0 = bcd_window_start(x, color.width()), y0 = bcd_window_start(y, color.height());
+    const int nx = std::min(3, color.width()), ny = std::min(3, color.height()), n = nx * ny;
+    if (n < 2) return false;
+    for (int c = 0; c < 3; ++c) {
+        double sum = 0, sq = 0;
+        for (int yy = y0; yy < y0 + ny; ++yy)
+            for (int xx = x0; xx < x0 + nx; ++xx) sum += color(xx, yy, c);
+        const double m = sum / n;
+        for (int yy = y0; yy < y0 + ny; ++yy)
+            for (int xx = x0; xx < x0 + nx; ++xx) sq += (color(xx, yy, c) - m) * (color(xx, yy, c) - m);
+        const double sd = std::sqrt(sq / (n - 1));
+        if (std::fabs(color(x, y, c) - m) > k * sd) return true;
+    }
+    return false;
+}
+
+// The pixel of (x, y)'s window whose colour has the least L1 distance to all the others (the
+// first one on a tie, in row order).
+inline void bcd_medoid(const view& color, int x, int y, int& pick_x, int& pick_y) {
+    const int x0 = bcd_window_start(x, color.width()), y0 = bcd_window_start(y, color.height());
+    const int x1 = x0 + std::min(3, color.width()), y1 = y0 + std::min(3, color.height());
+    double best = HUGE_VAL;
+    for (int ya = y0; ya < y1; ++ya)
+        for (int xa = x0; xa < x1; ++xa) {
+            double d = 0;
+            for (int yb = y0; yb < y1; ++yb)
+                for (int xb = x0; xb < x1; ++xb)
+                    for (int c = 0; c < 3; ++c) d += std::fabs(color(xa, ya, c) - color(xb, yb, c));
+            if (d < best) {
+                best = d;
+                pick_x = xa;
+                pick_y = ya;
+            }
+        }
+}
+
 inline void bcd_spikes(const view& color, const view& /*variance*/, float k = 2.0f) {
     const int w = color.width(), h = color.height();
     std::vector<float> out(static_cast<std::size_t>(w) * h * 3);
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
-            int px[9], py[9], n = 0;
-            double sum[3] = {0, 0, 0}, sum2[3] = {0, 0, 0};
-            for (int dy = -1; dy <= 1; ++dy)
-                for (int dx = -1; dx <= 1; ++dx) {
-                    const int xx = x + dx, yy = y + dy;
-                    if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
-                    px[n] = xx;
-                    py[n] = yy;
-                    ++n;
-                    for (int c = 0; c < 3; ++c) {
-                        sum[c] += color(xx, yy, c);
-                        sum2[c] += static_cast<double>(color(xx, yy, c)) * color(xx, yy, c);
-                    }
-                }
-            bool spike = false;
-            for (int c = 0; c < 3; ++c) {
-                const double m = sum[c] / n, sd = std::sqrt(std::max(sum2[c] / n - m * m, 0.0));
-                spike |= std::fabs(color(x, y, c) - m) > k * sd && sd > 0;
-            }
             int pick_x = x, pick_y = y;
-            if (spike) {  // the window's L1 medoid
-                double best = HUGE_VAL;
-                for (int i = 0; i < n; ++i) {
-                    double d = 0;
-                    for (int j = 0; j < n; ++j)
-                        for (int c = 0; c < 3; ++c) d += std::fabs(color(px[i], py[i], c) - color(px[j], py[j], c));
-                    if (d < best) {
-                        best = d;
-                        pick_x = px[i];
-                        pick_y = py[i];
-                    }
-                }
-            }
+            if (bcd_is_spike(color, x, y, k)) bcd_medoid(color, x, y, pick_x, pick_y);
             for (int c = 0; c < 3; ++c) out[(static_cast<std::size_t>(y) * w + x) * 3 + c] = color(pick_x, pick_y, c);
         }
     for (int y = 0; y < h; ++y)
@@ -251,12 +265,15 @@ inline std::size_t repair_nonfinite(const view& a_col, const view& a_var, const 
 //   median_of_means   the K buffers grouped into M consecutive groups of K/M, each group
 //                     averaged, the per-channel median of the M group means (the mean of
 //                     the two middle ones for even M).
-//   gmon              G-MoN (Buisine, Delepoulle and Renaud, "Firefly removal in Monte
-//                     Carlo rendering with adaptive Median of meaNs", EGSR 2021): per
-//                     pixel, the Gini coefficient of the M means, averaged over the
-//                     channels (values shifted to be non-negative, plus a tiny epsilon);
+//   gmon              G-MoN's binary variant (Buisine, Delepoulle and Renaud, "Firefly
+//                     removal in Monte Carlo rendering with adaptive Median of meaNs", EGSR
+//                     2021): per pixel, the Gini coefficient G of the M means, averaged over
+//                     the channels (values shifted to be non-negative, plus a tiny epsilon);
 //                     below the threshold (the paper's 0.25) the mean of the means, else
 //                     their median.
+//   agmon             the paper's adaptive G-MoN (Section 4.3, Eq. 6), no threshold: the
+//                     sorted means with c = floor(G M / 2) dropped at each end, averaged;
+//                     the mean where the means agree, nearer their median as G grows.
 // Each writes interleaved RGB. Non-finite buffer values are left out of the pixel's values
 // (the same repair as above, generalised: the other buffers hold unbiased estimates).
 using buffer_list = std::vector<const float*>;
@@ -330,19 +347,50 @@ inline void median_of_means(const buffer_list& buf, std::size_t pixels, int grou
     }
 }
 
+// Pixel p's M means per channel (into means, channel after channel) and their Gini
+// coefficient averaged over the channels; scratch holds M values.
+inline double pixel_means_gini(const buffer_list& buf, std::size_t p, int groups, float* means, float* scratch) {
+    double g = 0;
+    for (int c = 0; c < 3; ++c) {
+        float* m = means + static_cast<std::size_t>(c) * groups;
+        group_means(buf, p * 3 + c, groups, m);
+        std::copy_n(m, groups, scratch);
+        g += gini(scratch, groups) / 3.0;
+    }
+    return g;
+}
+
 inline void gmon(const buffer_list& buf, std::size_t pixels, int groups, double threshold, float* out) {
-    std::vector<float> means(static_cast<std::size_t>(groups) * 3), scratch(means.size());
+    std::vector<float> means(static_cast<std::size_t>(groups) * 3), scratch(static_cast<std::size_t>(groups));
     for (std::size_t p = 0; p < pixels; ++p) {
-        double g = 0;
-        for (int c = 0; c < 3; ++c) {
-            group_means(buf, p * 3 + c, groups, &means[static_cast<std::size_t>(c) * groups]);
-            std::copy_n(&means[static_cast<std::size_t>(c) * groups], groups, scratch.begin());
-            g += gini(scratch.data(), groups) / 3.0;
-        }
+        const double g = pixel_means_gini(buf, p, groups, means.data(), scratch.data());
         for (int c = 0; c < 3; ++c) {
             float* m = &means[static_cast<std::size_t>(c) * groups];
             out[p * 3 + c] = g < threshold ? finite_mean(m, groups) : finite_median(m, groups);
         }
+    }
+}
+
+// The mean of the finite values among v[0..n) once sorted, c = floor(g m / 2) of the m dropped
+// at each end (at least one kept); 0 when none is finite.
+inline float gini_trimmed_mean(float* v, int n, double g) {
+    int m = 0;
+    for (int i = 0; i < n; ++i)
+        if (std::isfinite(v[i])) v[m++] = v[i];
+    if (m == 0) return 0.0f;
+    std::sort(v, v + m);
+    const int c = std::min(static_cast<int>(std::floor(g * m / 2.0)), (m - 1) / 2);
+    double s = 0;
+    for (int i = c; i < m - c; ++i) s += v[i];
+    return static_cast<float>(s / (m - 2 * c));
+}
+
+inline void agmon(const buffer_list& buf, std::size_t pixels, int groups, float* out) {
+    std::vector<float> means(static_cast<std::size_t>(groups) * 3), scratch(static_cast<std::size_t>(groups));
+    for (std::size_t p = 0; p < pixels; ++p) {
+        const double g = pixel_means_gini(buf, p, groups, means.data(), scratch.data());
+        for (int c = 0; c < 3; ++c)
+            out[p * 3 + c] = gini_trimmed_mean(&means[static_cast<std::size_t>(c) * groups], groups, g);
     }
 }
 

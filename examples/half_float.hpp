@@ -19,18 +19,29 @@ struct half16 {
     std::uint16_t bits = 0;
 };
 
-inline half16 to_half(float f) {  // round to nearest even; tiny values flush to zero
+// float -> half as Imath::half converts: round to nearest even, half's subnormals below
+// 2^-14, overflow to infinity, and a NaN stays a NaN (sign and the top of its payload kept).
+inline half16 to_half(float f) {
     std::uint32_t x;
     std::memcpy(&x, &f, 4);
-    const std::uint32_t sign = (x >> 16) & 0x8000u;
-    const int e = static_cast<int>((x >> 23) & 0xff) - 127 + 15;
-    std::uint32_t m = x & 0x7fffffu;
-    if (e <= 0) return {static_cast<std::uint16_t>(sign)};
-    if (e >= 31) return {static_cast<std::uint16_t>(sign | 0x7c00u)};
-    std::uint32_t h = sign | (static_cast<std::uint32_t>(e) << 10) | (m >> 13);
-    const std::uint32_t rest = m & 0x1fffu;
-    if (rest > 0x1000u || (rest == 0x1000u && (h & 1u))) ++h;
-    return {static_cast<std::uint16_t>(h)};
+    const std::uint32_t sign = (x >> 16) & 0x8000u, a = x & 0x7fffffffu;
+    auto bits = [&](std::uint32_t h) { return half16{static_cast<std::uint16_t>(sign | h)}; };
+    if (a >= 0x7f800000u) {  // Inf, NaN: a NaN whose payload lies below half's bits keeps one
+        const std::uint32_t m = (a & 0x7fffffu) >> 13;
+        return bits(0x7c00u | m | (a != 0x7f800000u && m == 0 ? 1u : 0u));
+    }
+    if (a >= 0x477ff000u) return bits(0x7c00u);  // 65520 and above round past 65504
+    if (a >= 0x38800000u) {                       // a normal half: rebias, round 13 bits to even
+        const std::uint32_t r = a - 0x38000000u;
+        return bits((r + 0xfffu + ((r >> 13) & 1u)) >> 13);
+    }
+    if (a <= 0x33000000u) return bits(0);  // up to 2^-25, half the smallest subnormal: to even, 0
+    // a subnormal half: the significand in units of 2^-24, rounded to even (it may round up
+    // to the smallest normal, whose bits follow the largest subnormal's)
+    const int shift = 126 - static_cast<int>(a >> 23);  // 14 .. 24
+    const std::uint32_t s = 0x800000u | (a & 0x7fffffu), tie = 1u << (shift - 1);
+    const std::uint32_t h = s >> shift, rest = s & ((tie << 1) - 1u);
+    return bits(h + (rest > tie || (rest == tie && (h & 1u)) ? 1u : 0u));
 }
 
 inline float to_float(half16 v) {

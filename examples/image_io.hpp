@@ -94,6 +94,12 @@ inline bool exr_size_plausible(std::uint64_t pixels, std::uint64_t channels, std
     return pixels * channels * 4 <= (std::uint64_t{1} << 20) + file_bytes * 4096;
 }
 
+inline std::size_t exr_channel_count(const Imf::Header& header) {
+    std::size_t n = 0;
+    for (auto it = header.channels().begin(); it != header.channels().end(); ++it) ++n;
+    return n;
+}
+
 // A header's channel names, comma-separated, in the file's order.
 inline std::string exr_channel_list(const Imf::Header& header) {
     std::string list;
@@ -225,9 +231,8 @@ inline std::string exr_header_check(Imf::IStream& in, std::uint64_t stream_bytes
     const Imath::Box2i dw = probe.dataWindow();
     const std::int64_t w = std::int64_t{dw.max.x} - dw.min.x + 1, h = std::int64_t{dw.max.y} - dw.min.y + 1;
     if (w <= 0 || h <= 0 || w > max_side || h > max_side) return "has a bad data window";
-    std::size_t in_file = 0;
-    for (auto it = probe.channels().begin(); it != probe.channels().end(); ++it) ++in_file;
-    if (!exr_size_plausible(static_cast<std::uint64_t>(w * h), std::max(in_file, channels_wanted), stream_bytes))
+    if (!exr_size_plausible(static_cast<std::uint64_t>(w * h), std::max(exr_channel_count(probe), channels_wanted),
+                            stream_bytes))
         return "has a data window too large for the file (or beyond the 2^27-pixel limit)";
     in.seekg(0);
     return {};
@@ -481,6 +486,23 @@ inline std::string exr_locate_channels(const Imf::MultiPartInputFile& mp, const 
     return "missing channel(s) " + missing + " (the file has " + (have.empty() ? "no part but deep ones" : have) + ")";
 }
 
+// Refuses a part to be read whose pixels could not come from the file: a line of it holds
+// every channel of the part, wanted or not, and the output every channel asked for, so each
+// counts (exr_header_check saw only the first part's header).
+inline std::string exr_part_plausible(const Imf::MultiPartInputFile& mp, int part, std::size_t wanted,
+                                      std::uint64_t stream_bytes) {
+    const Imf::Header& h = mp.header(part);
+    const Imath::Box2i dw = h.dataWindow();
+    const std::int64_t w = std::int64_t{dw.max.x} - dw.min.x + 1, ht = std::int64_t{dw.max.y} - dw.min.y + 1;
+    const std::size_t channels = std::max(exr_channel_count(h), wanted);
+    if (w > 0 && ht > 0 && w <= max_side && ht <= max_side &&
+        exr_size_plausible(static_cast<std::uint64_t>(w * ht), channels, stream_bytes))
+        return {};
+    const std::string name = h.hasName() ? h.name() : "#" + std::to_string(part);
+    return "part '" + name + "' is too large for the file: " + std::to_string(w) + " x " + std::to_string(ht) +
+           " pixels of " + std::to_string(channels) + " channels in " + std::to_string(stream_bytes) + " bytes";
+}
+
 // A multi-part file: each channel from the part exr_locate_channels finds; the parts read
 // must share one data window.
 inline std::string exr_read_multipart(Imf::IStream& in, std::uint64_t stream_bytes,
@@ -493,6 +515,8 @@ inline std::string exr_read_multipart(Imf::IStream& in, std::uint64_t stream_byt
     for (int p : part)
         if (mp.header(p).dataWindow() != first.dataWindow())
             return "the parts that hold " + names[0] + " and the other channels have different data windows";
+    for (int p : part)
+        if (std::string e = exr_part_plausible(mp, p, names.size(), stream_bytes); !e.empty()) return e;
     if (!exr_prepare(first.dataWindow(), first.displayWindow(), names, stream_bytes, out)) return "bad data window";
     for (std::size_t c = 0; c < names.size(); ++c) {
         if (std::find(part.begin(), part.begin() + static_cast<std::ptrdiff_t>(c), part[c]) != part.begin() + static_cast<std::ptrdiff_t>(c))

@@ -9,6 +9,7 @@
 #include <OpenEXR/ImfStdIO.h>
 #include <OpenEXR/ImfTiledOutputPart.h>
 
+#include <dirent.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -24,6 +25,7 @@
 #include <string>
 #include <vector>
 
+#include "half_float.hpp"
 #include "image_io.hpp"
 
 namespace {
@@ -192,6 +194,58 @@ std::string imf_write_parts(const std::vector<part_spec>& parts) {
         }
     }
     return os.str();
+}
+
+// A temporary folder, removed with what it holds (no subfolders) when the test ends.
+struct temp_dir {
+    std::string path;
+    temp_dir() {
+        const char* tmp = std::getenv("TMPDIR");
+        path = std::string(tmp ? tmp : "/tmp") + "/firefly-exr-XXXXXX";
+        if (!::mkdtemp(&path[0])) path.clear();
+    }
+    ~temp_dir() {
+        if (DIR* d = path.empty() ? nullptr : ::opendir(path.c_str())) {
+            while (const dirent* e = ::readdir(d))
+                if (std::strcmp(e->d_name, ".") != 0 && std::strcmp(e->d_name, "..") != 0)
+                    ::unlink((path + "/" + e->d_name).c_str());
+            ::closedir(d);
+            ::rmdir(path.c_str());
+        }
+    }
+};
+
+// A two-part file of a few KB through OpenEXR's core writer: part 'a', one half channel at
+// one pixel; part 'b', R, G, B and `extra` more half channels over 65536 x 16 pixels in one
+// ZIP chunk of a few bytes. A line of 'b' holds all of its channels: with 1000 extra, the
+// chunk claims 2.1 GB unpacked.
+bool write_many_channels(const std::string& path, int extra) {
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    exr_context_t ctxt = nullptr;
+    if (exr_start_write(&ctxt, path.c_str(), EXR_WRITE_FILE_DIRECTLY, &init) != EXR_ERR_SUCCESS) return false;
+    int a = 0, b = 0;
+    exr_attr_box2i_t display{}, data{};  // one display window for all parts, (0, 0)
+    data.max.x = 65535;
+    data.max.y = 15;
+    const exr_attr_v2f_t centre{};
+    bool ok = exr_add_part(ctxt, "a", EXR_STORAGE_SCANLINE, &a) == EXR_ERR_SUCCESS &&
+              exr_initialize_required_attr_simple(ctxt, a, 1, 1, EXR_COMPRESSION_NONE) == EXR_ERR_SUCCESS &&
+              exr_add_channel(ctxt, a, "Z", EXR_PIXEL_HALF, EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1) == EXR_ERR_SUCCESS &&
+              exr_add_part(ctxt, "b", EXR_STORAGE_SCANLINE, &b) == EXR_ERR_SUCCESS &&
+              exr_initialize_required_attr(ctxt, b, &display, &data, 1.0f, &centre, 1.0f, EXR_LINEORDER_INCREASING_Y,
+                                           EXR_COMPRESSION_ZIP) == EXR_ERR_SUCCESS;
+    std::vector<std::string> names{"B", "G", "R"};
+    for (int i = 0; i < extra; ++i) names.push_back("x" + std::to_string(10000 + i));
+    for (const auto& n : names)
+        ok = ok && exr_add_channel(ctxt, b, n.c_str(), EXR_PIXEL_HALF, EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1) == EXR_ERR_SUCCESS;
+    const std::vector<std::uint8_t> zeros(64, 0);
+    std::vector<std::uint8_t> packed;  // a zlib stream of 64 bytes: shorter than the chunk claims
+    zip::codec codec;
+    ok = ok && codec.pack(zeros.data(), zeros.size(), packed) && packed.size() < zeros.size() &&
+         exr_write_header(ctxt) == EXR_ERR_SUCCESS &&
+         exr_write_scanline_chunk(ctxt, a, 0, zeros.data(), 2) == EXR_ERR_SUCCESS &&
+         exr_write_scanline_chunk(ctxt, b, 0, packed.data(), packed.size()) == EXR_ERR_SUCCESS;
+    return exr_finish(&ctxt) == EXR_ERR_SUCCESS && ok;
 }
 
 // Channel c of an image, as float (half-rounded when the part stores half).
@@ -467,4 +521,95 @@ TEST_CASE("read_exr, read_pfm: a pipe is refused before it is opened, never wait
     CHECK(firefly_tools::read_pfm(dir + "/none", pfm) == "cannot open " + dir + "/none");
     ::unlink(pipe.c_str());
     ::rmdir(dir.c_str());
+}
+
+TEST_CASE("read_exr: a part whose lines claim more than the file holds is refused before any allocation", "[exr_io]") {
+    // Part 'a' passes the first header's check; the channels come from part 'b', whose lines
+    // count its 1003 channels, not the 3 asked for.
+    temp_dir dir;
+    REQUIRE_FALSE(dir.path.empty());
+    const std::string path = dir.path + "/many_channels.exr";
+    REQUIRE(write_many_channels(path, 1000));
+    struct stat st {};
+    REQUIRE(::stat(path.c_str(), &st) == 0);
+    REQUIRE(st.st_size < 64 * 1024);
+    image back;
+    const std::string e = firefly_tools::read_exr(path, {"R", "G", "B"}, back);
+    CHECK(e == path + ": part 'b' is too large for the file: 65536 x 16 pixels of 1003 channels in " +
+                   std::to_string(st.st_size) + " bytes");
+    CHECK(back.pixels.empty());
+}
+
+namespace {
+std::uint32_t bits_of(float f) {
+    std::uint32_t u;
+    std::memcpy(&u, &f, 4);
+    return u;
+}
+float float_of(std::uint32_t u) {
+    float f;
+    std::memcpy(&f, &u, 4);
+    return f;
+}
+
+// float -> half against Imath::half. Imath built with F16C quiets a signalling NaN, its
+// software path keeps it: either is taken.
+bool same_half(std::uint32_t u) {
+    const float f = float_of(u);
+    const std::uint16_t ours = firefly_examples::to_half(f).bits, ref = Imath::half(f).bits();
+    return ours == ref || (std::isnan(f) && (ours | 0x0200u) == ref);
+}
+
+// Floats around every rounding point of half: for exponents in half's range, each half step
+// (the kept bits k) with the dropped bits at 0, 1, just below, at and above the tie, and all
+// ones. `d` is how many of the 24 significand bits half drops.
+std::vector<std::uint32_t> rounding_points() {
+    std::vector<std::uint32_t> v;
+    for (std::uint32_t e = 101; e <= 143; ++e) {
+        const int d = e >= 113 ? 13 : std::min(126 - static_cast<int>(e), 24);
+        const std::uint32_t tie = 1u << (d - 1), full = (tie << 1) - 1u;
+        for (std::uint32_t k = 0x800000u >> d; k <= 0xffffffu >> d; ++k)
+            for (std::uint32_t low : {0u, 1u, tie - 1u, tie, tie + 1u, full}) {
+                const std::uint32_t s = (k << d) + low;
+                if (s >= 0x800000u && s <= 0xffffffu) v.push_back(e << 23 | (s & 0x7fffffu));
+            }
+    }
+    return v;
+}
+}  // namespace
+
+TEST_CASE("half16: float -> half is Imath::half's, rounding, subnormals and NaN included", "[exr_io][half]") {
+    using firefly_examples::half16;
+    std::vector<std::uint32_t> floats = rounding_points();
+    for (std::uint32_t e = 0; e < 256; ++e)  // every exponent (float subnormals, Inf and NaN too),
+        for (std::uint32_t m = 0; m < 0x800000u; m += 4093)  // the mantissa stepped
+            for (std::uint32_t low : {0u, 1u, 0x3fu})
+                floats.push_back(e << 23 | std::min(m + low, 0x7fffffu));
+    for (std::uint32_t m : {1u, 0x1fffu, 0x2000u, 0x2001u, 0x3fffffu, 0x400000u, 0x400001u, 0x7fffffu})
+        floats.push_back(0x7f800000u | m);  // NaN payloads, signalling and quiet
+    floats.push_back(0x7f800000u);          // Inf
+    floats.push_back(0);
+    for (float f : {6.1e-5f, 6.1035156e-05f, 5.96e-8f, 2.98e-8f, 3e-8f, 1e-7f, 65504.0f, 65519.99f, 65520.0f, 1e9f})
+        floats.push_back(bits_of(f));
+    std::size_t bad = 0;
+    std::uint32_t first_bad = 0;
+    for (std::uint32_t u : floats)
+        for (std::uint32_t sign : {0u, 0x80000000u})
+            if (!same_half(u | sign) && bad++ == 0) first_bad = u | sign;
+    INFO("floats checked: " << 2 * floats.size() << ", first mismatch: 0x" << std::hex << first_bad);
+    CHECK(bad == 0);
+    CHECK(firefly_examples::to_half(6.1e-5f).bits == 0x03ffu);  // the largest subnormal, not 0
+    CHECK(std::isnan(firefly_examples::to_float(firefly_examples::to_half(-std::nanf("")))));
+    CHECK(std::signbit(firefly_examples::to_float(firefly_examples::to_half(-std::nanf("")))));
+    // every half reads as Imath reads it and stores back to its own bits
+    std::size_t round_trip = 0, reads = 0;
+    for (std::uint32_t b = 0; b < 65536; ++b) {
+        const half16 h{static_cast<std::uint16_t>(b)};
+        Imath::half ref;
+        ref.setBits(static_cast<unsigned short>(b));
+        reads += bits_of(firefly_examples::to_float(h)) != bits_of(static_cast<float>(ref));
+        round_trip += firefly_examples::to_half(firefly_examples::to_float(h)).bits != b;
+    }
+    CHECK(reads == 0);
+    CHECK(round_trip == 0);
 }
