@@ -290,6 +290,26 @@ TEST_CASE("find_dropped: each pair's p-value is its window's, counted directly",
     }
 }
 
+// A mask bit past k names no buffer and a mask of every buffer is not partly black: both count
+// as nothing (a bit past k was counted past the strip's per-buffer arrays: heap overflow).
+TEST_CASE("find_dropped: mask bits past k and masks of every buffer count as nothing", "[dropped][errors]") {
+    const int w = 40, h = 30;
+    for (const int k : {2, 3, 9}) {
+        const std::vector<std::uint64_t> clean = null_black_map(w, h, k, 1, 0.5, 5u);
+        std::vector<std::uint64_t> stray = clean;
+        const std::uint64_t all = (std::uint64_t{1} << k) - 1;
+        for (std::size_t i = 0; i < stray.size(); ++i) {
+            if (i % 3 == 0) stray[i] |= std::uint64_t{1} << (k + static_cast<int>(i % 5));  // past k (and past 8)
+            if (i % 7 == 1 && clean[i] == 0) stray[i] = all;                                 // every buffer
+        }
+        std::size_t t_clean = 0, t_stray = 0;
+        const std::vector<std::uint64_t> want = found_masks(clean, w, h, k, &t_clean);
+        INFO("k " << k);
+        CHECK(found_masks(stray, w, h, k, &t_stray) == want);
+        CHECK(t_stray == t_clean);
+    }
+}
+
 TEST_CASE("find_dropped: the 8 flips and transposes and executors give the same pixels", "[dropped]") {
     const int w = 70, h = 45;
     std::vector<std::uint8_t> lone = null_lone_map(w, h, 2, 0.3, 9u);

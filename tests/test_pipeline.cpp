@@ -1187,11 +1187,11 @@ TEST_CASE("pipeline: a pixel on a line whose other half drew as low as the backg
     CHECK(rebuilt(where::no_line, 5.0f));
 }
 
-// A pixel that is a global outlier in half B (20, its variance 25) and only a local flag in
-// half A (20 rho, a small variance): a pair, which decide_pairs judges by its own p-values.
+// A pixel that is a global outlier in half B (10, its variance 6.25) and only a local flag in
+// half A (10 rho, a small variance): a pair, which decide_pairs judges by its own p-values.
 // The frame's decision also took A's local p-value into its family and, where refused,
-// marked A consistent: A kept 108 beside B's 20 (default options), and under `agree` with a
-// strict excess limit B was "rebuilt from the other half", from A's 108.
+// marked A consistent: A kept 55 beside B's 10 (default options, rho 5.5), and under `agree`
+// with a strict excess limit B was "rebuilt from the other half", from A's 55.
 TEST_CASE("a local flag paired with the other half's outlier is decided once, as a pair", "[pipeline][highlights]") {
     sim::scene sc = sim::named_scene("flat", 64, 64, 11);
     sc.spp = 16;

@@ -320,17 +320,25 @@ bool fill_black_masks(int w, int h, BlackAt&& black_at, std::vector<Mask>& masks
 // The dropped pixels of a w x h frame of k buffers (2 <= k <= 64), row-major into `out`, the
 // black buffers given by black_at(x, y): a std::uint64_t whose bit i is set where buffer i is
 // black at a partly black pixel (some buffers black, the others finite and not black), 0
-// elsewhere; taken row by row across the executor, no window pass where there is none.
+// elsewhere (a bit past k, or all k set, counts as 0); taken row by row across the executor,
+// no window pass where there is none.
 // alpha: the frame's promise (Bonferroni's level over the pairs). Returns the pairs tested.
 template <class BlackAt>
 std::size_t find_dropped_masks(int w, int h, int k, double alpha, BlackAt&& black_at, dropped_scratch& s,
                                const executor& exec, std::vector<dropped_pixel>& out) {
     out.clear();
+    // Bits past k name no buffer, and a pixel black in all k is not partly black: both are
+    // taken out of what black_at gives (a stray bit was counted past the strip's arrays).
+    const std::uint64_t all = k >= 64 ? ~std::uint64_t{0} : k <= 0 ? 0 : (std::uint64_t{1} << k) - 1;
+    auto partly = [&](int x, int y) {
+        const std::uint64_t m = static_cast<std::uint64_t>(black_at(x, y)) & all;
+        return m == all ? std::uint64_t{0} : m;
+    };
     if (k <= 8)
-        return detail::fill_black_masks(w, h, black_at, s.lone, exec)
+        return detail::fill_black_masks(w, h, partly, s.lone, exec)
                    ? detail::find_dropped_in(s.lone.data(), w, h, k, alpha, s, exec, out)
                    : 0;
-    return detail::fill_black_masks(w, h, black_at, s.wide, exec)
+    return detail::fill_black_masks(w, h, partly, s.wide, exec)
                ? detail::find_dropped_in(s.wide.data(), w, h, k, alpha, s, exec, out)
                : 0;
 }

@@ -228,7 +228,7 @@ private:
 
 // The steps of the calibration's lattice along x and y for `cells` = pixels / 16,384: the
 // same step on both axes (sqrt(cells)), except that an axis shorter than two steps takes a
-// point every other pixel at most and the long one the rest. One step for both left no row
+// step of at most half its length (two points at least) and the long one the rest. One step for both left no row
 // of a frame of fewer rows than the step (a 70000 x 1 frame: no ratio, factor 1 unsaid).
 // At most one axis is that short (both: w h / 4 < cells = w h / 16384), so a transposed frame
 // gets the transposed steps.
@@ -1032,9 +1032,10 @@ private:
     void frame_level(frame_report& rep) {
         frame_log_p_.clear();
         // A pair (an outlier in both halves, a local flag among them) is decided by its own
-        // p-values (pair_log_p_) and the pair rule: its local flag's p-value counted twice in
-        // the family, and where refused, kept as consistent what decide_pairs rebuilt (a
-        // firefly left at 108 beside its other half's 20, or copied into the other half).
+        // p-values (pair_log_p_) and the pair rule alone, not here: its local flag's p-value
+        // was once counted here too, twice in the family, and where refused here kept as
+        // consistent what decide_pairs rebuilt (a firefly left at 55 beside its other half's
+        // 10, or under `agree` copied into the other half).
         auto one_half = [&](int h, std::size_t j) {
             const half_state& s = halves_[h];
             return s.log_p[j] <= 0 && !(s.label[s.order[j]] & (highlight_bit | consistent_bit)) &&
