@@ -94,6 +94,20 @@ inline bool exr_size_plausible(std::uint64_t pixels, std::uint64_t channels, std
     return pixels * channels * 4 <= (std::uint64_t{1} << 20) + file_bytes * 4096;
 }
 
+// A data window's width and height (64-bit: a window may span int's range) into w and h, and
+// whether both sides are in 1..max_side.
+inline bool exr_window_shape(const Imath::Box2i& dw, std::int64_t& w, std::int64_t& h) {
+    w = std::int64_t{dw.max.x} - dw.min.x + 1;
+    h = std::int64_t{dw.max.y} - dw.min.y + 1;
+    return w > 0 && h > 0 && w <= max_side && h <= max_side;
+}
+
+// The same, and `channels` of it plausible for a file of stream_bytes: a window the tools read.
+inline bool exr_window_fits(const Imath::Box2i& dw, std::size_t channels, std::uint64_t stream_bytes, std::int64_t& w,
+                            std::int64_t& h) {
+    return exr_window_shape(dw, w, h) && exr_size_plausible(static_cast<std::uint64_t>(w * h), channels, stream_bytes);
+}
+
 inline std::size_t exr_channel_count(const Imf::Header& header) {
     std::size_t n = 0;
     for (auto it = header.channels().begin(); it != header.channels().end(); ++it) ++n;
@@ -228,9 +242,8 @@ inline std::string exr_header_check(Imf::IStream& in, std::uint64_t stream_bytes
     Imf::Header probe;
     probe.readFrom(in, version);
     if (!multipart && in.tellg() != end) return "has a header OpenEXR reads differently from its sizes";
-    const Imath::Box2i dw = probe.dataWindow();
-    const std::int64_t w = std::int64_t{dw.max.x} - dw.min.x + 1, h = std::int64_t{dw.max.y} - dw.min.y + 1;
-    if (w <= 0 || h <= 0 || w > max_side || h > max_side) return "has a bad data window";
+    std::int64_t w = 0, h = 0;
+    if (!exr_window_shape(probe.dataWindow(), w, h)) return "has a bad data window";
     if (!exr_size_plausible(static_cast<std::uint64_t>(w * h), std::max(exr_channel_count(probe), channels_wanted),
                             stream_bytes))
         return "has a data window too large for the file (or beyond the 2^27-pixel limit)";
@@ -391,10 +404,8 @@ std::string exr_read_chunks(File& file, const exr_chunk_layout& l, const Imath::
 // parts) its channels come from; false when the window is bad or too large for the file.
 inline bool exr_prepare(const Imath::Box2i& dw, const Imath::Box2i& disp, const std::vector<std::string>& names,
                         std::uint64_t stream_bytes, image& out) {
-    const std::int64_t w = std::int64_t{dw.max.x} - dw.min.x + 1, h = std::int64_t{dw.max.y} - dw.min.y + 1;
-    if (w <= 0 || h <= 0 || w > max_side || h > max_side ||
-        !exr_size_plausible(static_cast<std::uint64_t>(w * h), names.size(), stream_bytes))
-        return false;
+    std::int64_t w = 0, h = 0;
+    if (!exr_window_fits(dw, names.size(), stream_bytes, w, h)) return false;
     out.width = static_cast<int>(w);
     out.height = static_cast<int>(h);
     out.channels = names;
@@ -492,12 +503,9 @@ inline std::string exr_locate_channels(const Imf::MultiPartInputFile& mp, const 
 inline std::string exr_part_plausible(const Imf::MultiPartInputFile& mp, int part, std::size_t wanted,
                                       std::uint64_t stream_bytes) {
     const Imf::Header& h = mp.header(part);
-    const Imath::Box2i dw = h.dataWindow();
-    const std::int64_t w = std::int64_t{dw.max.x} - dw.min.x + 1, ht = std::int64_t{dw.max.y} - dw.min.y + 1;
     const std::size_t channels = std::max(exr_channel_count(h), wanted);
-    if (w > 0 && ht > 0 && w <= max_side && ht <= max_side &&
-        exr_size_plausible(static_cast<std::uint64_t>(w * ht), channels, stream_bytes))
-        return {};
+    std::int64_t w = 0, ht = 0;
+    if (exr_window_fits(h.dataWindow(), channels, stream_bytes, w, ht)) return {};
     const std::string name = h.hasName() ? h.name() : "#" + std::to_string(part);
     return "part '" + name + "' is too large for the file: " + std::to_string(w) + " x " + std::to_string(ht) +
            " pixels of " + std::to_string(channels) + " channels in " + std::to_string(stream_bytes) + " bytes";

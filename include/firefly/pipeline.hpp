@@ -228,8 +228,9 @@ private:
 
 // The steps of the calibration's lattice along x and y for `cells` = pixels / 16,384: the
 // same step on both axes (sqrt(cells)), except that an axis shorter than two steps takes a
-// step of at most half its length (two points at least) and the long one the rest. One step for both left no row
-// of a frame of fewer rows than the step (a 70000 x 1 frame: no ratio, factor 1 unsaid).
+// step of at most half its length (two points at least) and the long one the rest. One step
+// for both left no row of a frame of fewer rows than the step (a 70000 x 1 frame: no ratio,
+// factor 1 unsaid).
 // At most one axis is that short (both: w h / 4 < cells = w h / 16384), so a transposed frame
 // gets the transposed steps.
 inline void lattice_steps(double cells, int w, int h, int& sx, int& sy) noexcept {
