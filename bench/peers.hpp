@@ -372,14 +372,15 @@ inline void gmon(const buffer_list& buf, std::size_t pixels, int groups, double 
 }
 
 // The mean of the finite values among v[0..n) once sorted, c = floor(g m / 2) of the m dropped
-// at each end (at least one kept); 0 when none is finite.
+// at each end (none for g <= 0, at least one kept); 0 when none is finite. (Equal means give a
+// Gini a rounding below 0, -2.6e-17 for eight at 2.15: floor made that c = -1, read before v.)
 inline float gini_trimmed_mean(float* v, int n, double g) {
     int m = 0;
     for (int i = 0; i < n; ++i)
         if (std::isfinite(v[i])) v[m++] = v[i];
     if (m == 0) return 0.0f;
     std::sort(v, v + m);
-    const int c = std::min(static_cast<int>(std::floor(g * m / 2.0)), (m - 1) / 2);
+    const int c = g > 0 ? std::min(static_cast<int>(std::floor(std::min(g, 1.0) * m / 2.0)), (m - 1) / 2) : 0;
     double s = 0;
     for (int i = c; i < m - c; ++i) s += v[i];
     return static_cast<float>(s / (m - 2 * c));

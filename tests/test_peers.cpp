@@ -104,3 +104,23 @@ TEST_CASE("agmon, gmon: G-MoN's adaptive and binary variants on hand-computed me
     firefly_peers::agmon(list_of(b), 1, 2, out);
     CHECK(out[0] == Approx(25.0));
 }
+
+TEST_CASE("agmon: equal means, whose Gini rounds below 0, are averaged whole", "[peers]") {
+    // Eight equal means of 2.1467233 give a Gini of -2.6e-17 (the sum of (2i - 9) x rounds below
+    // 0), and floor(G M / 2) was -1: the trimmed mean read the value before the array (a heap
+    // overflow; 2e47 on the Cycles seed renders, a different value each run).
+    std::vector<float> v(8, 2.14672327f);
+    std::vector<float> scratch = v;
+    REQUIRE(firefly_peers::gini(scratch.data(), 8) <= 0.0);
+    const auto b = pixel_buffers(v);
+    float out[3] = {};
+    firefly_peers::agmon(list_of(b), 1, 8, out);
+    for (float o : out) CHECK(o == Approx(2.14672327f));
+    // and directly: a Gini below 0, NaN or above 1 trims nothing, or at most all but one
+    v.assign({1, 2, 3, 4, 100});
+    CHECK(firefly_peers::gini_trimmed_mean(v.data(), 5, -1e-17) == Approx(22.0));
+    v.assign({1, 2, 3, 4, 100});
+    CHECK(firefly_peers::gini_trimmed_mean(v.data(), 5, std::nan("")) == Approx(22.0));
+    v.assign({1, 2, 3, 4, 100});
+    CHECK(firefly_peers::gini_trimmed_mean(v.data(), 5, 7.0) == Approx(3.0));
+}

@@ -470,15 +470,16 @@ TEST_CASE("a pixel of a highlight spot dimmer than the spot is judged at the spo
     // (8 and 6, variance 100 each): relative error sqrt(200) / 14 = 1.01 at its own level,
     // past even the cluster limit (0.8), yet 14 / 60 = 0.24 at the spot's, and its noise is
     // the spot's (14.1 against 10, within 0.8 / 0.5 of it). Beside the spot, two unrelated
-    // fireflies on one pixel (one sample each: a standard error above their sum) carry their
-    // own noise and are judged at their own level.
+    // fireflies on one pixel (one sample each, 300 and 1500: a standard error of 0.85 of their
+    // sum, past the cluster limit, and neither half far enough over the other to be a firefly
+    // on a highlight) carry their own noise and are judged at their own level.
     auto frame = [](float spot, float spot_variance) {
         auto hv = std::make_unique<halves>(flat(64, 48, 5));
         for (int y = 20; y < 23; ++y)
             for (int x = 20; x < 23; ++x)
                 for (int half = 0; half < 2; ++half) hv->set(half, x, y, spot, spot_variance);
-        hv->set(0, 23, 21, 300.0f, 4 * 300.0f * 300.0f);
-        hv->set(1, 23, 21, 900.0f, 4 * 900.0f * 900.0f);
+        hv->set(0, 23, 21, 300.0f, 300.0f * 300.0f);
+        hv->set(1, 23, 21, 1500.0f, 1500.0f * 1500.0f);
         return hv;
     };
     auto pixel = [](const halves& hv, int half, int x, int y) { return hv.f.color[half][hv.at(x, y) * 3]; };
