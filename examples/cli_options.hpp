@@ -111,6 +111,13 @@ inline std::string parse_frames(const std::string& s, options& c) {
 }
 
 // Validators: a finite number in a range (open or closed ends), a whole number in a range.
+// A default as --help shows it (8, 32, 1e-04).
+inline std::string number_text(double v) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%g", v);
+    return text;
+}
+
 inline CLI::Validator number_in(double lo, double hi, bool open_lo, bool open_hi, const std::string& what) {
     return CLI::Validator(
         [=](std::string& s) -> std::string {
@@ -256,6 +263,7 @@ inline void add_detector_options(CLI::App& app, options& c) {
     app.add_option_function<double>("--energy-sigma", [&c](double v) { c.o.energy_sigma = c.x.energy_sigma = v; },
                                     "width in pixels of the energy return's Gaussian")
         ->type_name("X")
+        ->default_str(number_text(c.o.energy_sigma))
         ->check(number_in(1, 64, false, false, "a number from 1 to 64"))
         ->group("detector (every mode)");
     app.add_option_function<double>("--energy-coarse-sigma",
@@ -263,6 +271,7 @@ inline void add_detector_options(CLI::App& app, options& c) {
                                     "width in pixels of the energy return's wider scale, used where sparse fireflies "
                                     "agree with it (0: none; not above --energy-sigma: none)")
         ->type_name("X")
+        ->default_str(number_text(c.o.energy_coarse_sigma))
         ->check(number_in(0, 0, false, false, "0") | number_in(2, 256, false, false, "a number from 2 to 256"))
         ->group("detector (every mode)");
     app.add_option_function<double>("--energy-density-evidence",
@@ -298,7 +307,7 @@ inline void add_detector_options(CLI::App& app, options& c) {
         ->check(number_in(0, 1e30, false, false, "a number >= 0"))->group(g);
     app.add_option("--cluster-relative-error", o.highlight.cluster_relative_error,
                    "confident rule bound for pixels next to another both-half outlier; 0: off")
-        ->check(number_in(0, 1e30, false, false, "a number >= 0"))->group(g);
+        ->type_name("X")->check(number_in(0, 1e30, false, false, "a number >= 0"))->group(g);
     app.add_option("--kernel", o.reconstruction.kernel_width, "reconstruction kernel width, odd, 3 to 63")->type_name("N")
         ->check(whole_in(3, 63, "an odd whole number from 3 to 63") &
                 CLI::Validator([](std::string& s) { return std::atoll(s.c_str()) % 2 ? "" : "wants an odd whole number, not '" + s + "'"; }, ""))

@@ -46,14 +46,22 @@ std::string enum_choices() {
     return s;
 }
 
-// A Python bool or a numpy one (a flag read from an array is numpy.bool_).
+// A Python bool or a numpy one (a flag read from an array is numpy.bool_, or a 0-d bool array).
 bool is_boolean(py::handle v) {
-    return PyBool_Check(v.ptr()) || py::isinstance(v, py::module_::import("numpy").attr("bool_"));
+    const py::module_ np = py::module_::import("numpy");
+    if (PyBool_Check(v.ptr()) || py::isinstance(v, np.attr("bool_"))) return true;
+    return py::isinstance(v, np.attr("ndarray")) && v.attr("dtype").attr("kind").cast<std::string>() == "b";
+}
+
+// An array of one or more dimensions is no option value (numpy would read [0.5] as 0.5).
+bool is_sized_array(py::handle v) {
+    return py::isinstance(v, py::module_::import("numpy").attr("ndarray")) && v.attr("ndim").cast<int>() != 0;
 }
 
 template <class T>
 T option_from_python(const std::string& name, py::handle v) {
     const bool is_bool = is_boolean(v);
+    if (is_sized_array(v)) throw py::type_error(name + " must be a single value, not an array");
     if constexpr (std::is_enum_v<T>) {
         if (!py::isinstance<py::str>(v)) throw py::type_error(name + " must be a string: one of " + enum_choices<T>());
         const std::string s = v.cast<std::string>();
@@ -64,9 +72,14 @@ T option_from_python(const std::string& name, py::handle v) {
         if (!is_bool) throw py::type_error(name + " must be True or False");
         return PyObject_IsTrue(v.ptr()) == 1;
     } else if constexpr (std::is_integral_v<T>) {
-        if (is_bool || !PyIndex_Check(v.ptr())) throw py::type_error(name + " must be an integer");
+        // PyNumber_Index, not int(): int() truncates 5.9 held in a 0-d float array to 5.
+        const py::object index = is_bool ? py::object() : py::reinterpret_steal<py::object>(PyNumber_Index(v.ptr()));
+        if (!index) {
+            PyErr_Clear();
+            throw py::type_error(name + " must be an integer");
+        }
         int overflow = 0;
-        const long long x = PyLong_AsLongLongAndOverflow(py::int_(py::reinterpret_borrow<py::object>(v)).ptr(), &overflow);
+        const long long x = PyLong_AsLongLongAndOverflow(index.ptr(), &overflow);
         if (overflow != 0 || x < std::numeric_limits<T>::min() || x > std::numeric_limits<T>::max())
             throw py::value_error(name + " is out of range");
         return static_cast<T>(x);
@@ -315,12 +328,16 @@ image_view<T> view_of(const char* name, const py::array& a, std::initializer_lis
                               py::str(a.attr("shape")).cast<std::string>());
     const int c = a.ndim() == 3 ? checked_extent(name, a.shape(2)) : 1;
     bool accepted = false;
-    std::string list;
+    std::string list;  // "1 channel", "1 or 3 channels", "1, 2, 3 or 4 channels"
+    const std::size_t count = channels.size();
+    std::size_t i = 0;
     for (const int k : channels) {
         accepted |= c == k;
-        list += (list.empty() ? "" : " or ") + std::to_string(k);
+        list += (i == 0 ? "" : i + 1 == count ? " or " : ", ") + std::to_string(k);
+        ++i;
     }
-    if (!accepted) throw py::value_error(std::string(name) + " must have " + list + " channels, not " + std::to_string(c));
+    list += count == 1 && *channels.begin() == 1 ? " channel" : " channels";
+    if (!accepted) throw py::value_error(std::string(name) + " must have " + list + ", not " + std::to_string(c));
     // A zero stride means "packed" to create(); to numpy it means what it says (a broadcast
     // array, every pixel in one place), which a writeable view must not be.
     for (py::ssize_t k = 0; k < a.ndim(); ++k)
@@ -429,7 +446,7 @@ std::string detector_doc() {
         "Detector(*, threads=1, **options)\n\n"
         "Finds and removes fireflies using the two half buffers of a frame. Keep one per stream of\n"
         "frames: it caches Student-t points and scratch memory across frames. threads: up to this\n"
-        "many threads per frame (the two halves run in parallel). Options (keyword: default):\n";
+        "many threads per frame, 1 to 256 (the two halves run in parallel). Options (keyword: default):\n";
     return s + keywords_text(options_to_dict(detector_options{}), "  ", "\n");
 }
 
@@ -460,14 +477,20 @@ void def_run(py::class_<py_detector>& c, const char* name, const char* doc) {
         py::arg("b_mask") = py::none());
 }
 
+constexpr int max_threads = 256;
+
 // A detector class: keyword constructor (threads and options), options, threads and repr.
 template <class PyDet, class FromKwargs, class ToDict>
 py::class_<PyDet> detector_class(py::module_& m, const char* name, const std::string& doc, FromKwargs from_kwargs,
                                  ToDict to_dict, const char* options_doc) {
     py::class_<PyDet> c(m, name, doc.c_str());
-    c.def(py::init([from_kwargs](int threads, const py::kwargs& kw) {
-              if (threads < 1) throw py::value_error("threads must be >= 1");
-              return new PyDet(from_kwargs(kw), threads);
+    c.def(py::init([from_kwargs](const py::object& threads_given, const py::kwargs& kw) {
+              // As the tool's --threads: a count past the machine's threads only costs memory,
+              // and thousands can abort the process (glibc, thread-local data).
+              const long long threads = option_from_python<long long>("threads", threads_given);
+              if (threads < 1 || threads > max_threads)
+                  throw py::value_error("threads must lie in [1, " + std::to_string(max_threads) + "]");
+              return new PyDet(from_kwargs(kw), static_cast<int>(threads));
           }),
           py::kw_only(), py::arg("threads") = 1)
         .def_property_readonly("options", [to_dict](const PyDet& d) { return to_dict(d.det.options()); }, options_doc)

@@ -678,6 +678,8 @@ TEST_CASE("constant, 1x1, all-black and all-NaN frames", "[pipeline][hard]") {
     frame_report r = d.process(a, b);
     CHECK(r.error.ok());
     CHECK(r.half[0].ignored == 10);
+    CHECK(std::isnan(r.half[0].median));  // no valid pixel: no median (it read 0, a noiseless frame)
+    CHECK(std::isnan(r.half[0].mad));
     // one NaN in an all-black frame: taken from the other half's black, and the frame is ok
     // (it said "no usable pixel in either half" while every pixel had been rebuilt)
     black[4] = std::numeric_limits<float>::quiet_NaN();
@@ -696,6 +698,7 @@ TEST_CASE("constant, 1x1, all-black and all-NaN frames", "[pipeline][hard]") {
     CHECK(r.half[0].reconstruction.code() == errc::no_valid_pixels);
     CHECK(r.half[0].unreachable == 10);
     CHECK(r.half[0].repaired == 0);
+    CHECK(std::isnan(r.half[1].median));
     for (float x : nan) CHECK(std::isnan(x));  // left as they were, not silently 0
     for (std::size_t i = 0; i < 10; ++i) {     // and the masks say where (nonfinite alone: "repaired")
         CHECK(int(ma[i]) == int(mask_bits::nonfinite | mask_bits::left));

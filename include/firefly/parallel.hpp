@@ -18,7 +18,6 @@
 #include <vector>
 #if defined(__cpp_exceptions)
 #include <exception>
-#include <system_error>
 #endif
 
 namespace firefly {
@@ -130,14 +129,17 @@ private:
     void start() {
         if (!workers_.empty() || wanted_ == 0 || tried_) return;
         tried_ = true;
-        workers_.reserve(wanted_);
 #if defined(__cpp_exceptions)
         try {
+            workers_.reserve(wanted_);
             for (unsigned i = 0; i < wanted_; ++i) workers_.emplace_back([this] { loop(); });
-        } catch (const std::system_error&) {
-            // Keep the workers that started; the caller's thread covers the rest.
+        } catch (const std::exception&) {
+            // std::system_error (no more threads) or std::bad_alloc (a count past memory):
+            // keep the workers that started; the caller's thread covers the rest. Were it let
+            // out, in_use_ would stay set and every later run be serial.
         }
 #else
+        workers_.reserve(wanted_);
         for (unsigned i = 0; i < wanted_; ++i) workers_.emplace_back([this] { loop(); });
 #endif
         started_.store(workers_.size(), std::memory_order_relaxed);

@@ -163,8 +163,8 @@ struct half_report {
     std::size_t implausible = 0;        // finite, but beyond what the other half allows any
                                         // estimate (find_implausible; not counted in valid)
     std::size_t negative_variance = 0;  // pixels with a negative variance (taken as 0)
-    double median = 0.0;                // of the standard deviations
-    double mad = 0.0;
+    double median = 0.0;                // of the standard deviations (NaN where valid is 0)
+    double mad = 0.0;                   // their median absolute deviation (NaN likewise)
     std::size_t bound = 0;              // modified Z-score upper bound
     std::size_t outliers = 0;           // generalized ESD outliers and local flags
     std::size_t local = 0;              // of those, flagged by the local test only
@@ -600,8 +600,10 @@ private:
                        }) / static_cast<double>(c.valid);
             });
         }
-        r.median = b.median;
-        r.mad = b.mad;
+        // A half with no valid pixel has no median: NaN says so (0 would read as a frame of
+        // noiseless pixels).
+        r.median = c.valid > 0 ? b.median : std::numeric_limits<double>::quiet_NaN();
+        r.mad = c.valid > 0 ? b.mad : std::numeric_limits<double>::quiet_NaN();
         // The bound's test as one float comparison: cut is the smallest float x with
         // b.above(x), found exactly (above() is monotone in x).
         float cut = HUGE_VALF;

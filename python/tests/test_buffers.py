@@ -219,7 +219,8 @@ def test_options_round_trip():
     (lambda c, v: firefly.BufferDetector(pair={"": 1}), TypeError, "unexpected keyword argument ''"),
     (lambda c, v: firefly.BufferDetector(pair=3), TypeError, "pair must be a dict"),
     (lambda c, v: firefly.BufferDetector(pair={"alpha": 2.0}), ValueError, "alpha"),
-    (lambda c, v: firefly.BufferDetector(threads=0), ValueError, "threads must be >= 1"),
+    (lambda c, v: firefly.BufferDetector(threads=0), ValueError, r"threads must lie in \[1, 256\]"),
+    (lambda c, v: firefly.BufferDetector(radius=np.array(2.7)), TypeError, "radius must be an integer"),  # read as 2
     (lambda c, v: firefly.BufferDetector(pair={b"alpha": 0.3}), TypeError, "keys must be strings"),
     (lambda c, v: firefly.BufferDetector(pair={1: 2}), TypeError, "keys must be strings"),
     (lambda c, v: firefly.BufferDetector().process(np.array(1.0)), ValueError, r"shape \(K, H, W, C\)"),

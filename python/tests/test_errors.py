@@ -97,8 +97,8 @@ def test_misaligned_data_is_refused():
 @pytest.mark.parametrize("shape,match", [
     ((72,), r"a_color must have shape \(H, W, C\) or \(H, W\)"),
     ((72, 96, 3, 1), r"a_color must have shape \(H, W, C\) or \(H, W\)"),
-    ((72, 96, 5), "a_color must have 1 or 2 or 3 or 4 channels, not 5"),
-    ((72, 96, 0), "a_color must have 1 or 2 or 3 or 4 channels, not 0"),
+    ((72, 96, 5), "a_color must have 1, 2, 3 or 4 channels, not 5"),
+    ((72, 96, 0), "a_color must have 1, 2, 3 or 4 channels, not 0"),
     ((0, 96, 3), "colour image is empty"),
     ((72, 95, 3), "variance and colour differ in size"),
 ])
@@ -115,7 +115,7 @@ def test_variance_channels_are_a_value_error():
 
 def test_alpha_shape_is_a_value_error():
     h, w, _ = frame_shape()
-    with pytest.raises(ValueError, match="a_alpha must have 1 channels, not 3"):
+    with pytest.raises(ValueError, match="a_alpha must have 1 channel, not 3"):
         call(a_alpha=np.ones((h, w, 3), np.float32))
     with pytest.raises(ValueError, match="alpha and colour differ in size"):
         call(b_alpha=np.ones((h + 1, w), np.float32))
@@ -134,7 +134,7 @@ def test_mask_size_is_a_value_error():
     h, w, _ = frame_shape()
     with pytest.raises(ValueError, match="a mask must be 1 channel, frame-sized"):
         call(a_mask=np.zeros((h, w + 1), np.uint8))
-    with pytest.raises(ValueError, match="b_mask must have 1 channels, not 2"):
+    with pytest.raises(ValueError, match="b_mask must have 1 channel, not 2"):
         call(b_mask=np.zeros((h, w, 2), np.uint8))
 
 
@@ -150,7 +150,10 @@ def test_mask_size_is_a_value_error():
     ({"kernel_width": 2 ** 40}, "kernel_width is out of range"),
     ({"max_iterations": 2 ** 80}, "max_iterations is out of range"),
     ({"alpha": 10 ** 400}, "alpha is out of range"),
-    ({"threads": 0}, "threads must be >= 1"),
+    ({"threads": 0}, r"threads must lie in \[1, 256\]"),
+    ({"threads": 257}, r"threads must lie in \[1, 256\]"),  # 400 aborted the interpreter
+    ({"threads": 2 ** 31}, r"threads must lie in \[1, 256\]"),  # a TypeError of pybind11 before
+    ({"threads": 2 ** 70}, "threads is out of range"),
 ])
 def test_bad_option_value_is_a_value_error(options, match):
     with pytest.raises(ValueError, match=match):
@@ -164,6 +167,14 @@ def test_bad_option_value_is_a_value_error(options, match):
     ({"reconstruct": 1}, "reconstruct must be True or False"),
     ({"kernel_width": np.bool_(True)}, "kernel_width must be an integer"),
     ({"alpha": np.bool_(True)}, "alpha must be a number"),
+    # 0-d arrays are read as their value, but not truncated or taken as a number when bool
+    ({"kernel_width": np.array(5.9)}, "kernel_width must be an integer"),  # read as 5
+    ({"max_iterations": np.array(7.8)}, "max_iterations must be an integer"),
+    ({"local_radius": np.array(True)}, "local_radius must be an integer"),  # read as 1
+    ({"sigma": np.array(True)}, "sigma must be a number"),  # read as 1.0
+    ({"sigma": np.array([0.5])}, "sigma must be a single value, not an array"),
+    ({"kernel_width": np.array([5])}, "kernel_width must be a single value"),
+    ({"threads": 2.0}, "threads must be an integer"),
     ({"highlight_rule": 2}, "highlight_rule must be a string"),
     ({"kernelwidth": 5}, "unexpected keyword argument 'kernelwidth'"),
     ({"": 5}, "unexpected keyword argument ''"),
@@ -176,6 +187,8 @@ def test_bad_option_type_or_name_is_a_type_error(options, match):
 def test_numpy_scalars_are_accepted_as_options():
     det = firefly.Detector(alpha=np.float32(0.25), kernel_width=np.int64(3))
     assert det.options["alpha"] == 0.25 and det.options["kernel_width"] == 3
+    det = firefly.Detector(sigma=np.array(1.5), kernel_width=np.array(7), threads=np.int32(2))
+    assert det.options["sigma"] == 1.5 and det.options["kernel_width"] == 7 and det.threads == 2
     for flag in (np.bool_(False), np.bool_(True)):
         assert firefly.Detector(reconstruct=flag).options["reconstruct"] == bool(flag)
 

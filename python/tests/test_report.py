@@ -169,6 +169,9 @@ def test_a_frame_with_nothing_to_rebuild_from_returns_a_report():
         assert np.all(m == firefly.MASK_NONFINITE | firefly.MASK_LEFT)
     assert np.all(np.isnan(arrays["a_color"]))
     assert rep.as_dict()["error"]["ok"] is False
+    # no valid pixel, no median: NaN (it read 0.0), in the attribute and in as_dict()
+    assert np.isnan(rep.half[0].median) and np.isnan(rep.half[1].mad)
+    assert np.isnan(rep.as_dict()["half"][0]["median"])
 
 
 def test_a_bucket_written_black_is_found_and_rebuilt():
