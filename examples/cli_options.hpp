@@ -329,7 +329,7 @@ inline void add_cross_options(CLI::App& app, options& c) {
         ->group(cross_group);
     app.add_option("--radius", c.x.radius, "the noise is pooled over (2 N + 1)^2 pixels")
         ->type_name("N")
-        ->check(whole_in(0, 8, "a whole number from 0 to 8"))
+        ->check(whole_in(1, 8, "a whole number from 1 to 8"))
         ->group(cross_group);
     app.add_flag_callback("--no-refine-noise", [&c] { c.x.refine_noise = false; },
                           "pool the neighbours' noise with their flagged buffers (no second look next to "

@@ -71,6 +71,21 @@ TEST_CASE("threads(n) runs every index exactly once", "[parallel]") {
     }
 }
 
+// unsigned(-1), "all" as some configurations write it: at most 1024 threads (it reserved 4
+// billion workers, which ended the program built without exceptions).
+TEST_CASE("threads(n) past 1024 runs on 1024 threads", "[parallel]") {
+    const executor e = executor::threads(static_cast<unsigned>(-1));
+    std::mutex m;
+    std::set<std::thread::id> ids;
+    for (int call = 0; call < 2; ++call)
+        e.run(4096, [&](std::size_t) {
+            std::lock_guard<std::mutex> l(m);
+            ids.insert(std::this_thread::get_id());
+        });
+    CHECK(ids.size() <= 1024);
+    CHECK(each_once(e, 5000));
+}
+
 TEST_CASE("threads(n) reuses the same threads across calls", "[parallel]") {
     for (unsigned n : {2u, 4u}) {
         const executor e = executor::threads(n);

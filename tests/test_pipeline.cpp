@@ -627,6 +627,31 @@ TEST_CASE("the detector's lambda cache is reused by the second frame", "[pipelin
     CHECK(r1.half[0].outliers == r2.half[0].outliers);
 }
 
+// A moved-from detector is used again as a fresh one (its lambda cache was a null pointer:
+// process() and scratch_bytes() crashed), and the detector moved to keeps working.
+TEST_CASE("a moved-from detector still cleans a frame", "[pipeline][errors]") {
+    const sim::scene s = sim::named_scene("sparse_fireflies", 96, 64, 3);
+    halves fresh(sim::simulate(s)), moved_from(sim::simulate(s)), moved_to(sim::simulate(s));
+    detector reference;
+    const frame_report r = fresh.process(reference);
+    REQUIRE(r.error.ok());
+    REQUIRE(r.half[0].fireflies > 0);
+    detector d;
+    detector e = std::move(d);
+    CHECK(d.scratch_bytes() == detector{}.scratch_bytes());  // empty, as a fresh one
+    const frame_report rd = moved_from.process(d);
+    CHECK(rd.error.ok());
+    CHECK(rd.half[0].fireflies == r.half[0].fireflies);
+    CHECK(moved_from.f.color[0] == fresh.f.color[0]);
+    CHECK(moved_from.f.color[1] == fresh.f.color[1]);
+    CHECK(moved_to.process(e).error.ok());
+    CHECK(moved_to.f.color[0] == fresh.f.color[0]);
+    detector g;
+    g = std::move(e);  // assigned from: e is usable again too
+    CHECK(moved_to.process(e).error.ok());
+    CHECK(d.shared_lambdas() != nullptr);
+}
+
 TEST_CASE("bad input is an error value and changes nothing", "[pipeline][errors]") {
     sim::frame f = flat(16, 12, 4), g = flat(16, 10, 4);
     halves a(f), b(g);

@@ -165,7 +165,7 @@ struct cross_buffer_options {
     bool find_implausible = true;  // a buffer's finite value that the others show no estimate
                                    // holds (a tile of 1e30, implausible.hpp): the same
     bool refine_noise = true;    // neighbours flagged at the cap pool their noise without their flagged buffers
-    int radius = 1;              // the noise is pooled over (2 radius + 1)^2 pixels (0 to 8)
+    int radius = 1;              // the noise is pooled over (2 radius + 1)^2 pixels (1 to 8)
     bool return_energy = true;   // K >= 3, 3 or 4 channels: the removed fireflies' energy is
                                  // returned where many agree on it (energy.hpp)
     double energy_sigma = 8.0;   // its Gaussian's width in pixels (1 to 64)
@@ -183,7 +183,9 @@ inline status check_cross_buffer_options(const cross_buffer_options& o) noexcept
     if (!(o.false_alarm > 0.0 && o.false_alarm < 0.5))
         return status{errc::invalid_argument, "false_alarm must lie in (0, 0.5)"};
     if (const status e = check_alpha(o.alpha); !e.ok()) return e;
-    if (o.radius < 0 || o.radius > 8) return status{errc::invalid_argument, "radius must lie in [0, 8]"};
+    // 0 is refused: a pixel's own noise is left out of its pool (its fireflies inflate it), so
+    // with no neighbour nothing was judged but a firefly on black (no flag otherwise, K 3-16)
+    if (o.radius < 1 || o.radius > 8) return status{errc::invalid_argument, "radius must lie in [1, 8]"};
     if (!(o.energy_sigma >= 1.0 && o.energy_sigma <= 64.0))
         return status{errc::invalid_argument, "energy_sigma must lie in [1, 64]"};
     if (status st = check_density_evidence(o.energy_density_evidence); !st.ok()) return st;

@@ -41,7 +41,10 @@ class thread_pool {
 public:
     using task = std::function<void(std::size_t)>;
 
-    explicit thread_pool(unsigned threads) : wanted_(threads > 1 ? threads - 1 : 0) {}
+    // At most max_threads: a count read as "all" (unsigned(-1)) asked for 4 billion workers, and
+    // reserving them ended the program without exceptions.
+    static constexpr unsigned max_threads = 1024;
+    explicit thread_pool(unsigned threads) : wanted_(threads > 1 ? (std::min)(threads, max_threads) - 1 : 0) {}
     thread_pool(const thread_pool&) = delete;
     thread_pool& operator=(const thread_pool&) = delete;
 
@@ -197,7 +200,7 @@ public:
     explicit executor(parallel_for f) : for_(std::move(f)) {}
 
     static executor serial() { return executor(); }
-    // Up to n threads per run (the caller's thread is one of them); n <= 1 is serial. The
+    // Up to n threads per run, at most 1024 (the caller's thread is one of them); n <= 1 is serial. The
     // n - 1 workers start on the first run and are shared by every copy of this executor;
     // they are joined when the last copy is destroyed. Concurrent run() calls on copies of one
     // executor do not wait for each other: the one that finds the pool busy runs its tasks on

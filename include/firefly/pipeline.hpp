@@ -242,6 +242,20 @@ inline void lattice_steps(double cells, int w, int h, int& sx, int& sy) noexcept
     if (sx < step) sy = static_cast<int>(rest(sx, most_y));
     else if (sy < step) sx = static_cast<int>(rest(sy, most_x));
 }
+// The detector's lambda cache. A moved-from shared_ptr is null, and a moved-from detector
+// used again dereferenced it (a crash): a move leaves the source sharing the cache instead,
+// as detectors may (one per thread, say).
+struct shared_cache {
+    std::shared_ptr<lambda_cache> p;
+    explicit shared_cache(std::shared_ptr<lambda_cache> q) noexcept : p(std::move(q)) {}
+    shared_cache(const shared_cache&) = default;
+    shared_cache& operator=(const shared_cache&) = default;
+    shared_cache(shared_cache&& o) noexcept : p(o.p) {}
+    shared_cache& operator=(shared_cache&& o) noexcept {
+        p = o.p;
+        return *this;
+    }
+};
 }  // namespace detail
 
 class detector {
@@ -251,16 +265,18 @@ public:
                       std::shared_ptr<lambda_cache> lambdas = nullptr)
         : options_(options), exec_(std::move(exec)),
           cache_(lambdas ? std::move(lambdas) : std::make_shared<lambda_cache>()) {}
+    // A moved-from detector stays usable: options and executor as moved, scratch empty, and
+    // the lambda cache shared with the detector it was moved to.
 
     const detector_options& options() const noexcept { return options_; }
     void set_options(const detector_options& o) { options_ = o; }
     void set_executor(executor e) { exec_ = std::move(e); }
-    lambda_cache& lambdas() noexcept { return *cache_; }
+    lambda_cache& lambdas() noexcept { return *cache_.p; }
     // The cache, to hand to another detector.
-    const std::shared_ptr<lambda_cache>& shared_lambdas() const noexcept { return cache_; }
+    const std::shared_ptr<lambda_cache>& shared_lambdas() const noexcept { return cache_.p; }
 
     std::size_t scratch_bytes() const noexcept {
-        std::size_t n = cache_->bytes() + local_scratch_.bytes() + local_result_.bytes() + calibration_.bytes() +
+        std::size_t n = cache_.p->bytes() + local_scratch_.bytes() + local_result_.bytes() + calibration_.bytes() +
                         pairs_.capacity() * sizeof(std::uint32_t) +
                         (pair_log_p_.capacity() + pair_level_log_p_.capacity() + pair_base_.capacity() +
                          pair_family_.capacity()) * sizeof(double) +
@@ -402,10 +418,10 @@ private:
         clock.lap(frame_report::candidates);
         // Stage 2 (serial): the ESD decision, reading and filling the lambda cache.
         {
-            const std::lock_guard<std::mutex> lock(cache_->mutex());
-            const std::size_t before = cache_->computed();
+            const std::lock_guard<std::mutex> lock(cache_.p->mutex());
+            const std::size_t before = cache_.p->computed();
             for (int h = 0; h < 2; ++h) decide(halves_[h], rep.half[h]);
-            rep.lambdas_computed = cache_->computed() - before;
+            rep.lambdas_computed = cache_.p->computed() - before;
         }
         clock.lap(frame_report::esd);
         // Stage 3: the variance calibration, the local test, the highlight check.
@@ -658,7 +674,7 @@ private:
         o.method = options_.lambdas;
         esd_result res;
         if (!s.order.empty())
-            detail::esd_from_removals(s.removed.data(), s.order.size(), s.rest, s.valid, o, *cache_, res);
+            detail::esd_from_removals(s.removed.data(), s.order.size(), s.rest, s.valid, o, *cache_.p, res);
         r.outliers = res.outliers;
         for (std::size_t j = 0; j < res.outliers; ++j) s.label[s.order[j]] |= outlier_bit;
     }
@@ -1616,7 +1632,7 @@ private:
 
     detector_options options_;
     executor exec_;
-    std::shared_ptr<lambda_cache> cache_;
+    detail::shared_cache cache_;
     half_state halves_[2];
     variance_calibration calibration_;
     std::vector<std::uint32_t> pairs_;

@@ -48,6 +48,7 @@ struct reconstruct_options {
     int kernel_width = 5;       // odd, >= 3
     double sigma = 1.0;         // Gaussian sigma in pixels
     double tolerance = 1e-3;    // phase 2 stops when max |change| / |value| falls below this
+                                // (0: at max_iterations alone)
     int max_iterations = 20;    // phase 2 iteration cap (0: phase 1 only)
 };
 

@@ -213,6 +213,7 @@ def test_options_round_trip():
     (lambda c, v: firefly.BufferDetector().process("abc"), TypeError, "sequence of numpy arrays"),
     (lambda c, v: firefly.BufferDetector().process([c[0], [1.0]]), TypeError, "numpy array"),
     (lambda c, v: firefly.BufferDetector(radius=9), ValueError, "radius must lie in"),
+    (lambda c, v: firefly.BufferDetector(radius=0), ValueError, r"radius must lie in \[1, 8\]"),
     (lambda c, v: firefly.BufferDetector(false_alarm=0.7), ValueError, "false_alarm must lie in"),
     (lambda c, v: firefly.BufferDetector(bogus=1), TypeError, "unexpected keyword argument 'bogus'"),
     (lambda c, v: firefly.BufferDetector(pair={"bogus": 1}), TypeError, "unexpected keyword argument 'bogus'"),
