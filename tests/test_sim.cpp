@@ -957,3 +957,39 @@ TEST_CASE("metrics: cleaned images that do not fit the frame give NaN, never a r
     const std::vector<float>* whole[2] = {&h.color[0], &h.color[1]};
     CHECK(sim::evaluate(h, whole).relmse >= 0);
 }
+
+// A null scene's name is read with its sample count's range checked: "spp4294967298" was read
+// by sscanf's %d (undefined past int) and glibc made it spp 2.
+TEST_CASE("named null scenes: the sample count is read whole or the name is unknown", "[sim][errors]") {
+    const sim::scene ok = sim::named_scene("null_k2_spp16", 8, 8, 1);
+    CHECK(ok.spp == 16);
+    CHECK(ok.effects != 0);
+    for (const char* bad : {"null_k1_spp4294967298", "null_k1_spp99999999999", "null_k1_spp1", "null_k1_spp-4",
+                            "null_k1_spp 4", "null_k1_spp4x", "null_k0_spp4", "null_k_spp4"}) {
+        const sim::scene s = sim::named_scene(bad, 8, 8, 1);
+        INFO(bad);
+        CHECK(s.effects == 0u);  // an unknown name: the flat scene
+        CHECK(s.name == "flat");
+    }
+}
+
+// The frame's own arrays are checked too: a half moved out of the frame (cleaned elsewhere)
+// was read past its end, and buffers without colour or ground truth read an empty expected.
+TEST_CASE("metrics: a frame whose own arrays do not fit gives NaN, never a read past them", "[sim][metrics][errors]") {
+    sim::frame h = sim::simulate(sim::named_scene("sparse_fireflies", 16, 12, 1));
+    std::vector<float> c0 = std::move(h.color[0]), c1 = h.color[1];
+    h.color[0].clear();
+    const std::vector<float>* cleaned[2] = {&c0, &c1};
+    CHECK(std::isnan(sim::evaluate(h, cleaned).recall));
+    h.color[0] = c0;
+    CHECK(sim::evaluate(h, cleaned).relmse >= 0);
+    h.highlight.resize(5);
+    CHECK(std::isnan(sim::evaluate(h, cleaned).relmse));
+    sim::buffers b;
+    b.width = b.height = 4;
+    CHECK(std::isnan(sim::evaluate_buffers(b, {}).relmse));
+    sim::buffers k3 = sim::simulate_buffers(sim::named_scene("sparse_fireflies", 16, 12, 2), 3);
+    k3.expected.pop_back();
+    CHECK(std::isnan(sim::evaluate_buffers(k3, k3.color).relmse));
+    CHECK(std::isnan(sim::combine(k3, k3.color)[0]));
+}

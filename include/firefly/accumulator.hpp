@@ -18,6 +18,7 @@
 // Memory: K x pixels x (1 count + 2 doubles per channel), plus the float views from finish().
 #pragma once
 
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <limits>
@@ -33,9 +34,10 @@ class sample_accumulator {
 public:
     sample_accumulator() = default;
 
-    // k >= 2 buffers of width x height pixels of `channels` (1 to 4) channels.
+    // k >= 2 buffers of width x height pixels of `channels` (1 to 4) channels. Views taken
+    // before (color(), variance(), views()) point into storage a reset frees: take them again.
     status reset(int width, int height, int k, int channels = 3) {
-        if (width <= 0 || height <= 0) return status{errc::invalid_argument, "accumulator: empty image"};
+        if (width <= 0 || height <= 0) return status{errc::empty_image, "accumulator: empty image"};
         if (k < 2 || k > 64) return status{errc::invalid_argument, "accumulator: 2 to 64 buffers"};
         if (channels < 1 || channels > 4) return status{errc::channel_mismatch, "accumulator: 1 to 4 channels"};
         const std::size_t px = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
@@ -66,7 +68,8 @@ public:
     // pixel holds at most 2^32 - 1 samples (its count is 32-bit): one more is refused
     // (size_overflow), where the count once wrapped to 0 and the mean turned NaN.
     status add(int x, int y, std::uint64_t sample_index, const float* value) noexcept {
-        if (x < 0 || y < 0 || x >= w_ || y >= h_ || value == nullptr)
+        if (value == nullptr) return status{errc::null_data, "accumulator: no sample values"};
+        if (x < 0 || y < 0 || x >= w_ || y >= h_)
             return status{errc::invalid_argument, "accumulator: sample outside the image"};
         if (count_[cell_of(x, y, sample_index)] == UINT32_MAX) return full();
         double v[4];
@@ -100,7 +103,10 @@ public:
     // buffers that have one (0 read as black: at 3 samples for 8 buffers a pixel kept 0.38 of
     // its light); with one sample its variance is unknown and is set to the sample's square
     // (relative standard error 1: the least it can claim). Finite values beyond FLT_MAX (a
-    // 1e30 sample's variance) are stored as FLT_MAX.
+    // 1e30 sample's variance) are stored as FLT_MAX. A NaN or Inf sample makes its buffer pixel
+    // NaN, and so do finite ones whose sums pass double's range (1e308 and -1e308: the
+    // difference overflowed, and came out as a mean of -Inf with variance 0). Views read 0
+    // before the first finish().
     void finish() {
         const std::size_t px = static_cast<std::size_t>(w_) * static_cast<std::size_t>(h_);
         for (int b = 0; b < k_; ++b)
@@ -109,8 +115,9 @@ public:
                 const double n = count_[cell];
                 for (int c = 0; c < nc_; ++c) {
                     const std::size_t e = cell * static_cast<std::size_t>(nc_) + static_cast<std::size_t>(c);
-                    const double m = n > 0 ? mean_[e] : std::numeric_limits<double>::quiet_NaN();
-                    double var = n >= 2 ? m2_[e] / (n - 1) / n : m * m;
+                    const bool value = n > 0 && std::isfinite(mean_[e]) && std::isfinite(m2_[e]);
+                    const double m = value ? mean_[e] : std::numeric_limits<double>::quiet_NaN();
+                    double var = value && n >= 2 ? m2_[e] / (n - 1) / n : m * m;  // (NaN without value)
                     if (!(var >= 0) && var == var) var = 0;  // never negative (NaN stays NaN)
                     using ct = channel_traits<float>;         // float saturates, never turns Inf
                     color_[static_cast<std::size_t>(b)][p * static_cast<std::size_t>(nc_) + static_cast<std::size_t>(c)] = ct::store(m);

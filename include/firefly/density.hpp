@@ -123,9 +123,9 @@ public:
         for (int j = (std::max)(0, r - y0); j < (std::min)(ph, h - y0 + r); ++j)
             for (int i = (std::max)(0, r - x0); i < (std::min)(pw, w - x0 + r); ++i) {
                 load(x0 - r + i, y0 - r + j, v);
-                for (int k = 0; k < N; ++k) in_[plane * k + offset(i, j, pw)] = v[k];
+                for (int k = 0; k < N; ++k) in_[plane * static_cast<std::size_t>(k) + offset(i, j, pw)] = v[k];
             }
-        for (int k = 0; k < N; ++k) {
+        for (std::size_t k = 0; k < static_cast<std::size_t>(N); ++k) {
             const double* in = &in_[plane * k];
             double* rows = &rows_[static_cast<std::size_t>(tw) * static_cast<std::size_t>(ph) * k];
             double* cols = &cols_[static_cast<std::size_t>(pw) * static_cast<std::size_t>(th) * k];

@@ -934,7 +934,7 @@ inline void energy_factors(energy_scratch& s) {
         for (std::size_t j = 0; j < nx; ++j) {
             const std::size_t n = i * nx + j;
             double r[record], f[3];
-            for (int k = 0; k < record; ++k) r[k] = s.xy[n * record + k];  // sum_order_for's sums
+            for (std::size_t k = 0; k < record; ++k) r[k] = s.xy[n * record + k];  // sum_order_for's sums
             shrunk_ratio(r, f);
             if (!s.coarse.empty()) {
                 double c[record], fc[3];

@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "../image_view.hpp"
 #include "random.hpp"
 #include "types.hpp"
 
@@ -53,17 +54,21 @@ inline int clamped_int(double v, int lo, int hi) noexcept {
 
 // Mean of the firefly ratio: U[0.5, 1.5) x E, or log-uniform on [E, E_max).
 // An energy that is not a finite positive number (NaN, infinite, 0 or below) draws no firefly
-// light: a ratio of 0, in the draws and in the expectation alike.
+// light: a ratio of 0, in the draws and in the expectation alike. One past 1e150 is held there,
+// as the spreads are (its square, in the variance, was inf and the variance NaN).
 inline bool usable_energy(double e) noexcept { return e > 0 && e <= DBL_MAX; }
+inline double held_energy(double e) noexcept { return (std::min)(e, 1e150); }
 inline double mean_ratio(const scene& sc) noexcept {
-    const double lo = sc.firefly_energy, hi = sc.firefly_energy_max;
-    if (!usable_energy(lo)) return 0.0;
-    return hi > lo && usable_energy(hi) ? (hi - lo) / std::log(hi / lo) : lo;
+    if (!usable_energy(sc.firefly_energy)) return 0.0;
+    const double lo = held_energy(sc.firefly_energy);
+    const double hi = usable_energy(sc.firefly_energy_max) ? held_energy(sc.firefly_energy_max) : 0.0;
+    return hi > lo ? (hi - lo) / std::log(hi / lo) : lo;
 }
 inline double draw_ratio(const scene& sc, counter_rng& r) noexcept {
-    const double lo = sc.firefly_energy, hi = sc.firefly_energy_max;
-    if (!usable_energy(lo)) return 0.0;
-    return hi > lo && usable_energy(hi) ? lo * std::exp(r.uniform() * std::log(hi / lo)) : lo * (0.5 + r.uniform());
+    if (!usable_energy(sc.firefly_energy)) return 0.0;
+    const double lo = held_energy(sc.firefly_energy);
+    const double hi = usable_energy(sc.firefly_energy_max) ? held_energy(sc.firefly_energy_max) : 0.0;
+    return hi > lo ? lo * std::exp(r.uniform() * std::log(hi / lo)) : lo * (0.5 + r.uniform());
 }
 // Per-sample probability from a share of pixels hit among n samples: 1 - (1 - p)^n = rate,
 // exactly (the Poisson form -log(1 - rate) / n overshot it, 0.325 of pixels hit for 0.30 at
@@ -175,7 +180,7 @@ public:
         const double hit = (std::min)(p.p_ff, 1.0) + (std::min)(p.p_caustic, 1.0);
         const double ff = hit * p.energy_scale * mean_ratio_;
         const double ordinary = 1.0 - (std::min)(hit, 1.0);
-        for (int c = 0; c < 3; ++c) out[c] = static_cast<float>(p.cov * (p.sign * p.mu[c] * ordinary + ff));
+        for (int c = 0; c < 3; ++c) out[c] = channel_traits<float>::store(p.cov * (p.sign * p.mu[c] * ordinary + ff));
         return p.cov * ff;
     }
 

@@ -206,6 +206,33 @@ inline bool cleaned_fit(const buffers& original, const std::vector<std::vector<f
     return cleaned_fit(original.pixels(), p.data(), p.size(), static_cast<std::size_t>(original.count()));
 }
 
+// Whether the ground truth the metrics read fits the frame's size: colour and expected RGB,
+// highlight, firefly and non-finite records per pixel or empty (a half moved out of a frame,
+// a hand-made one, were read past their end).
+template <class V>
+bool empty_or(const V& v, std::size_t n) {
+    return v.empty() || v.size() == n;
+}
+inline bool truth_fits(const frame& f) {
+    const std::size_t np = f.pixels();
+    if (f.width <= 0 || f.height <= 0 || f.expected.size() != np * 3) return false;
+    if (!empty_or(f.highlight, np) || !empty_or(f.firefly_expected, np)) return false;
+    for (int b = 0; b < 2; ++b)
+        if (f.color[b].size() != np * 3 || !empty_or(f.firefly_energy[b], np) || !empty_or(f.nonfinite[b], np))
+            return false;
+    return true;
+}
+inline bool truth_fits(const buffers& f) {
+    const std::size_t np = f.pixels(), k = f.color.size();
+    if (f.width <= 0 || f.height <= 0 || k == 0 || f.expected.size() != np * 3) return false;
+    if (!empty_or(f.highlight, np) || !empty_or(f.firefly_expected, np)) return false;
+    if (f.firefly_energy.size() != k || f.nonfinite.size() != k) return false;
+    for (std::size_t b = 0; b < k; ++b)
+        if (f.color[b].size() != np * 3 || !empty_or(f.firefly_energy[b], np) || !empty_or(f.nonfinite[b], np))
+            return false;
+    return true;
+}
+
 // Metrics of a call whose cleaned images do not fit: every one NaN (never a read past them).
 inline accuracy unfit() {
     const double nan = std::numeric_limits<double>::quiet_NaN();
@@ -224,9 +251,10 @@ inline void set_combined(accuracy& a, const combined_accuracy& c) {
 }  // namespace detail
 
 // `original` is the simulated frame, `cleaned_color[h]` the cleaned RGB colour of half h (the
-// frame's size; else every metric is NaN).
+// frame's size, as the frame's own arrays; else every metric is NaN).
 inline accuracy evaluate(const frame& original, const std::vector<float>* const cleaned_color[2]) {
-    if (!cleaned_color || !detail::cleaned_fit(original.pixels(), cleaned_color, 2, 2)) return detail::unfit();
+    if (!cleaned_color || !detail::truth_fits(original) || !detail::cleaned_fit(original.pixels(), cleaned_color, 2, 2))
+        return detail::unfit();
     accuracy a = detail::evaluate_counts(
         original, 2, [&](int b) { return &original.color[b]; }, [&](int b) { return cleaned_color[b]; });
     const std::size_t np = original.pixels();
@@ -240,7 +268,7 @@ inline accuracy evaluate(const frame& original, const std::vector<float>* const 
 // The combined image of K buffers: their mean weighted by samples (the estimate of all samples);
 // NaN unless `color` holds every buffer at the frame's size.
 inline std::vector<float> combine(const buffers& original, const std::vector<std::vector<float>>& color) {
-    if (!detail::cleaned_fit(original, color))
+    if (!detail::truth_fits(original) || !detail::cleaned_fit(original, color))
         return std::vector<float>(original.pixels() * 3, std::numeric_limits<float>::quiet_NaN());
     std::vector<float> out(original.pixels() * 3, 0.0f);
     double total = 0;
@@ -255,7 +283,7 @@ inline std::vector<float> combine(const buffers& original, const std::vector<std
 // K buffers: `cleaned[b]` is buffer b's cleaned RGB colour (as many as original.count(), each
 // the frame's size; else every metric is NaN).
 inline accuracy evaluate_buffers(const buffers& original, const std::vector<std::vector<float>>& cleaned) {
-    if (!detail::cleaned_fit(original, cleaned)) return detail::unfit();
+    if (!detail::truth_fits(original) || !detail::cleaned_fit(original, cleaned)) return detail::unfit();
     const int k = original.count();
     accuracy a = detail::evaluate_counts(
         original, k, [&](int b) { return &original.color[b]; }, [&](int b) { return &cleaned[b]; });

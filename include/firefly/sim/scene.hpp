@@ -32,6 +32,7 @@
 #include <utility>
 #include <vector>
 
+#include "../image_view.hpp"
 #include "layout.hpp"
 #include "random.hpp"
 #include "samples.hpp"
@@ -166,10 +167,11 @@ inline std::uint32_t simulate_pixel(const scene& sc, const pixel_model& p, std::
             mean += d * dk / dn;
             m2 += fm2 + d * d * dm * dk / dn;
         }
-        out.color[b][i * 3 + c] = static_cast<float>(p.cov * mean);
-        out.variance[b][i * 3 + c] = static_cast<float>(m2 * to_var_mean);
+        // (held at FLT_MAX past it, as the library stores: the plain cast is undefined there)
+        out.color[b][i * 3 + c] = channel_traits<float>::store(p.cov * mean);
+        out.variance[b][i * 3 + c] = channel_traits<float>::store(m2 * to_var_mean);
     }
-    if (k > 0) out.firefly_energy[b][i] = static_cast<float>(p.cov * h.sum / dn);
+    if (k > 0) out.firefly_energy[b][i] = channel_traits<float>::store(p.cov * h.sum / dn);
     return touched;
 }
 
@@ -249,7 +251,7 @@ inline buffers simulate_buffers(const scene& sc, int k) {
             const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(f.width) + static_cast<std::size_t>(x);
             const detail::pixel_model p = lay.model(x, y);
             const double ff_expected = lay.expected(p, &f.expected[i * 3]);
-            if (!f.firefly_expected.empty()) f.firefly_expected[i] = static_cast<float>(ff_expected);
+            if (!f.firefly_expected.empty()) f.firefly_expected[i] = channel_traits<float>::store(ff_expected);
             f.highlight[i] = p.highlight ? 1 : 0;
             if (!f.alpha.empty()) f.alpha[i] = static_cast<float>(p.cov);
             std::uint32_t touched = p.touched;

@@ -2,9 +2,14 @@
 // models.
 #pragma once
 
+#include <cctype>
+#include <cerrno>
+#include <climits>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <string>
 #include <vector>
 
@@ -105,6 +110,23 @@ inline bool named_accuracy_scene(const std::string& name, scene& s) {
     }
     return true;
 }
+
+// "null_k<shape>_spp<n>" with shape > 0 and n from 2 to INT_MAX (strtol: sscanf's %d past
+// int is undefined, and glibc read spp4294967298 as 2).
+inline bool parse_null_name(const std::string& name, double& shape, int& spp) {
+    if (name.compare(0, 6, "null_k") != 0) return false;
+    const char* s = name.c_str() + 6;
+    char* end = nullptr;
+    shape = std::strtod(s, &end);
+    if (end == s || std::strncmp(end, "_spp", 4) != 0 || !(shape > 0)) return false;
+    const char* n = end + 4;
+    if (!std::isdigit(static_cast<unsigned char>(*n))) return false;  // (no sign, no space)
+    errno = 0;
+    const long long v = std::strtoll(n, &end, 10);
+    if (errno == ERANGE || *end != '\0' || v < 2 || v > INT_MAX) return false;
+    spp = static_cast<int>(v);
+    return true;
+}
 }  // namespace detail
 
 // Named scenes; an unknown name gives the flat scene (no effect). "null_k<shape>_spp<n>" is
@@ -112,9 +134,7 @@ inline bool named_accuracy_scene(const std::string& name, scene& s) {
 inline scene named_scene(const std::string& name, int width = 256, int height = 256, std::uint64_t seed = 1) {
     double shape = 0;
     int spp = 0;
-    char tail = 0;
-    if (std::sscanf(name.c_str(), "null_k%lf_spp%d%c", &shape, &spp, &tail) == 2 && shape > 0 && spp >= 2)
-        return null_scene(seed, shape, spp, width, height);
+    if (detail::parse_null_name(name, shape, spp)) return null_scene(seed, shape, spp, width, height);
     scene s;
     s.name = name;
     s.width = width;
