@@ -137,7 +137,7 @@ public:
                 for (int i = 0; i < tw; ++i) {
                     const double rc = axis_sum(&rows[offset(i, j + r, tw)], tw, g[k]);  // rows, then columns
                     const double cr = axis_sum(&cols[offset(i + r, j, pw)], 1, g[k]);   // columns, then rows
-                    out[offset(i, j, tw) * N + static_cast<std::size_t>(k)] = (rc + cr) * 0.5;
+                    out[offset(i, j, tw) * N + k] = (rc + cr) * 0.5;
                 }
         }
     }

@@ -57,17 +57,15 @@ inline int clamped_int(double v, int lo, int hi) noexcept {
 // light: a ratio of 0, in the draws and in the expectation alike. One past 1e150 is held there,
 // as the spreads are (its square, in the variance, was inf and the variance NaN).
 inline bool usable_energy(double e) noexcept { return e > 0 && e <= DBL_MAX; }
-inline double held_energy(double e) noexcept { return (std::min)(e, 1e150); }
+inline double held_energy(double e) noexcept { return usable_energy(e) ? (std::min)(e, 1e150) : 0.0; }
 inline double mean_ratio(const scene& sc) noexcept {
-    if (!usable_energy(sc.firefly_energy)) return 0.0;
-    const double lo = held_energy(sc.firefly_energy);
-    const double hi = usable_energy(sc.firefly_energy_max) ? held_energy(sc.firefly_energy_max) : 0.0;
+    const double lo = held_energy(sc.firefly_energy), hi = held_energy(sc.firefly_energy_max);
+    if (lo == 0) return 0.0;
     return hi > lo ? (hi - lo) / std::log(hi / lo) : lo;
 }
 inline double draw_ratio(const scene& sc, counter_rng& r) noexcept {
-    if (!usable_energy(sc.firefly_energy)) return 0.0;
-    const double lo = held_energy(sc.firefly_energy);
-    const double hi = usable_energy(sc.firefly_energy_max) ? held_energy(sc.firefly_energy_max) : 0.0;
+    const double lo = held_energy(sc.firefly_energy), hi = held_energy(sc.firefly_energy_max);
+    if (lo == 0) return 0.0;
     return hi > lo ? lo * std::exp(r.uniform() * std::log(hi / lo)) : lo * (0.5 + r.uniform());
 }
 // Per-sample probability from a share of pixels hit among n samples: 1 - (1 - p)^n = rate,

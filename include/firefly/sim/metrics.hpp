@@ -200,37 +200,35 @@ inline bool cleaned_fit(std::size_t pixels, const std::vector<float>* const* cle
         if (!cleaned[b] || cleaned[b]->size() != pixels * 3) return false;
     return true;
 }
-inline bool cleaned_fit(const buffers& original, const std::vector<std::vector<float>>& cleaned) {
-    std::vector<const std::vector<float>*> p;
-    for (const auto& c : cleaned) p.push_back(&c);
-    return cleaned_fit(original.pixels(), p.data(), p.size(), static_cast<std::size_t>(original.count()));
-}
-
 // Whether the ground truth the metrics read fits the frame's size: colour and expected RGB,
-// highlight, firefly and non-finite records per pixel or empty (a half moved out of a frame,
-// a hand-made one, were read past their end).
+// highlight, firefly and non-finite records per pixel or empty, for each of its k buffers (a
+// half moved out of a frame, a hand-made one, were read past their end).
 template <class V>
 bool empty_or(const V& v, std::size_t n) {
     return v.empty() || v.size() == n;
 }
-inline bool truth_fits(const frame& f) {
+template <class Truth>
+bool truth_fits(const Truth& f, std::size_t k) {
     const std::size_t np = f.pixels();
     if (f.width <= 0 || f.height <= 0 || f.expected.size() != np * 3) return false;
     if (!empty_or(f.highlight, np) || !empty_or(f.firefly_expected, np)) return false;
-    for (int b = 0; b < 2; ++b)
-        if (f.color[b].size() != np * 3 || !empty_or(f.firefly_energy[b], np) || !empty_or(f.nonfinite[b], np))
-            return false;
-    return true;
-}
-inline bool truth_fits(const buffers& f) {
-    const std::size_t np = f.pixels(), k = f.color.size();
-    if (f.width <= 0 || f.height <= 0 || k == 0 || f.expected.size() != np * 3) return false;
-    if (!empty_or(f.highlight, np) || !empty_or(f.firefly_expected, np)) return false;
-    if (f.firefly_energy.size() != k || f.nonfinite.size() != k) return false;
     for (std::size_t b = 0; b < k; ++b)
         if (f.color[b].size() != np * 3 || !empty_or(f.firefly_energy[b], np) || !empty_or(f.nonfinite[b], np))
             return false;
     return true;
+}
+inline bool truth_fits(const frame& f) { return truth_fits(f, 2); }
+inline bool truth_fits(const buffers& f) {
+    const std::size_t k = f.color.size();
+    return k > 0 && f.firefly_energy.size() == k && f.nonfinite.size() == k && truth_fits(f, k);
+}
+
+// The frame's ground truth and K cleaned buffers, each the frame's size.
+inline bool cleaned_fit(const buffers& original, const std::vector<std::vector<float>>& cleaned) {
+    if (!truth_fits(original)) return false;
+    std::vector<const std::vector<float>*> p;
+    for (const auto& c : cleaned) p.push_back(&c);
+    return cleaned_fit(original.pixels(), p.data(), p.size(), static_cast<std::size_t>(original.count()));
 }
 
 // Metrics of a call whose cleaned images do not fit: every one NaN (never a read past them).
@@ -268,7 +266,7 @@ inline accuracy evaluate(const frame& original, const std::vector<float>* const 
 // The combined image of K buffers: their mean weighted by samples (the estimate of all samples);
 // NaN unless `color` holds every buffer at the frame's size.
 inline std::vector<float> combine(const buffers& original, const std::vector<std::vector<float>>& color) {
-    if (!detail::truth_fits(original) || !detail::cleaned_fit(original, color))
+    if (!detail::cleaned_fit(original, color))
         return std::vector<float>(original.pixels() * 3, std::numeric_limits<float>::quiet_NaN());
     std::vector<float> out(original.pixels() * 3, 0.0f);
     double total = 0;
@@ -283,7 +281,7 @@ inline std::vector<float> combine(const buffers& original, const std::vector<std
 // K buffers: `cleaned[b]` is buffer b's cleaned RGB colour (as many as original.count(), each
 // the frame's size; else every metric is NaN).
 inline accuracy evaluate_buffers(const buffers& original, const std::vector<std::vector<float>>& cleaned) {
-    if (!detail::truth_fits(original) || !detail::cleaned_fit(original, cleaned)) return detail::unfit();
+    if (!detail::cleaned_fit(original, cleaned)) return detail::unfit();
     const int k = original.count();
     accuracy a = detail::evaluate_counts(
         original, k, [&](int b) { return &original.color[b]; }, [&](int b) { return &cleaned[b]; });
