@@ -4,14 +4,14 @@
 # Exits non-zero when any target finds a crash, a leak, a timeout or an out-of-memory;
 # the reproducer is left in build/fuzz/findings/<target>/ (keep it in tests/fuzz/regressions/).
 #
-#   scripts/fuzz.sh [SECONDS] [pfm|exr|detector|buffers ...]
+#   scripts/fuzz.sh [SECONDS] [pfm|exr|detector|buffers|accumulator ...]
 #
 # Installs clang and libFuzzer with apt-get when they are missing (needs root).
 set -eu
 cd "$(dirname "$0")/.."
 secs=${1:-60}
 [ $# -gt 0 ] && shift
-targets=${*:-"pfm exr detector buffers"}
+targets=${*:-"pfm exr detector buffers accumulator"}
 build=build/fuzz
 
 have_libfuzzer() {
@@ -54,7 +54,7 @@ for t in $targets; do
     grep -E "stat::number_of_executed_units|cov: " "$build/fuzz_$t.log" | tail -n 2
   else
     echo "fuzz_$t: FINDING (log: $build/fuzz_$t.log, reproducer in $findings/)" >&2
-    grep -E "^==[0-9]+==ERROR|runtime error|fuzz_detector:|fuzz_buffers:|SUMMARY" "$build/fuzz_$t.log" | head -n 5 >&2
+    grep -E "^==[0-9]+==ERROR|runtime error|fuzz_[a-z]+:|SUMMARY" "$build/fuzz_$t.log" | head -n 5 >&2
     status=1
   fi
 done

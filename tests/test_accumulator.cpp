@@ -255,6 +255,21 @@ TEST_CASE("accumulator: a double tile's samples are summed as doubles", "[accumu
     CHECK(acc.variance(1)(0, 0) == Approx(1e-18).epsilon(1e-6));  // (2e-18 / 1) / 2
 }
 
+// One sample's variance is its square: a double sample past 1.3e154 squared to Inf, and a
+// finite sample read an infinite variance (found by fuzz_accumulator). It is held at the
+// float range, as every finite value is.
+TEST_CASE("accumulator: one sample past 1e154 has a variance of FLT_MAX, not Inf", "[accumulator][numerics]") {
+    for (const double big : {2e154, 1e200, -1e300, DBL_MAX}) {
+        sample_accumulator acc;
+        REQUIRE(acc.reset(1, 1, 2, 1).ok());
+        REQUIRE(acc.add_tile(0, 0, 0, *make_image_view(&big, 1, 1, 1)).ok());
+        acc.finish();
+        INFO("sample " << big);
+        CHECK(acc.color(0)(0, 0) == (big > 0 ? FLT_MAX : -FLT_MAX));
+        CHECK(acc.variance(0)(0, 0) == FLT_MAX);
+    }
+}
+
 // Property: on random sample streams (magnitudes from denormals to 1e30, both signs, zeros,
 // FLT_MAX, nearly constant runs), every buffer's mean and variance of the mean agree with a
 // two-pass reference in long double: the mean to float rounding, the variance to float

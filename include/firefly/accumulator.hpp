@@ -18,6 +18,7 @@
 // Memory: K x pixels x (1 count + 2 doubles per channel), plus the float views from finish().
 #pragma once
 
+#include <cfloat>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -103,10 +104,10 @@ public:
     // buffers that have one (0 read as black: at 3 samples for 8 buffers a pixel kept 0.38 of
     // its light); with one sample its variance is unknown and is set to the sample's square
     // (relative standard error 1: the least it can claim). Finite values beyond FLT_MAX (a
-    // 1e30 sample's variance) are stored as FLT_MAX. A NaN or Inf sample makes its buffer pixel
-    // NaN, and so do finite ones whose sums pass double's range (1e308 and -1e308: the
-    // difference overflowed, and came out as a mean of -Inf with variance 0). Views read 0
-    // before the first finish().
+    // 1e30 sample's variance, a lone 1e200 sample's square) are stored as FLT_MAX. A NaN or
+    // Inf sample makes its buffer pixel NaN, and so do finite ones whose sums pass double's
+    // range (1e308 and -1e308: the difference overflowed, and came out as a mean of -Inf with
+    // variance 0). Views read 0 before the first finish().
     void finish() {
         const std::size_t px = static_cast<std::size_t>(w_) * static_cast<std::size_t>(h_);
         for (int b = 0; b < k_; ++b)
@@ -119,6 +120,7 @@ public:
                     const double m = value ? mean_[e] : std::numeric_limits<double>::quiet_NaN();
                     double var = value && n >= 2 ? m2_[e] / (n - 1) / n : m * m;  // (NaN without value)
                     if (!(var >= 0) && var == var) var = 0;  // never negative (NaN stays NaN)
+                    if (value && var > DBL_MAX) var = DBL_MAX;  // one sample past 1.3e154 squared to Inf
                     using ct = channel_traits<float>;         // float saturates, never turns Inf
                     color_[static_cast<std::size_t>(b)][p * static_cast<std::size_t>(nc_) + static_cast<std::size_t>(c)] = ct::store(m);
                     variance_[static_cast<std::size_t>(b)][p * static_cast<std::size_t>(nc_) + static_cast<std::size_t>(c)] = ct::store(var);
