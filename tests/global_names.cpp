@@ -52,7 +52,8 @@ int FIREFLY_GLOBAL_NAMES_TU() {
     std::vector<double> dc(c.begin(), c.end()), dv(v.begin(), v.end()), dc2 = dc, dv2 = dv;
     std::vector<half> hv(c.size(), firefly_examples::to_half(0.01f)), hv2 = hv;
     std::vector<std::vector<float>> kc(4, c), kv(4, v);
+    std::vector<std::vector<double>> kdc(4, dc), kdv(4, dv);
     const firefly::sim::frame f = firefly::sim::simulate(firefly::sim::named_scene("production", 16, 16));
     return two_halves(c, v, c2, v2, w, h) + two_halves(dc, dv, dc2, dv2, w, h) + two_halves(c, hv, c2, hv2, w, h) +
-           k_buffers(kc, kv, w, h) + f.width;
+           k_buffers(kc, kv, w, h) + k_buffers(kdc, kdv, w, h) + f.width;
 }

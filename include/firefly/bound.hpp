@@ -57,7 +57,7 @@ bound_result modified_zscore_bound_if(std::size_t n, Value&& value, Keep&& keep,
         return keep(i) && std::isfinite(static_cast<double>(value(i)));
     };
     std::size_t count = 0;
-    for (std::size_t i = 0; i < n; ++i) count += kept(i) ? 1 : 0;
+    for (std::size_t i = 0; i < n; ++i) count += kept(i) ? 1u : 0u;
     r.n = count;
     if (count == 0 || !(threshold >= 0)) return r;
     r.threshold = threshold;

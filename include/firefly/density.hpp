@@ -109,17 +109,18 @@ template <int N>
 class density_sums {
 public:
     static constexpr int r = density_radius;
+    static constexpr std::size_t n = N;  // N as the arrays' bound (an int one: GCC's sign warning)
 
     // The sums over the tile [x0, x0 + tw) x [y0, y0 + th) of a w x h frame, into out (N per
     // pixel, row-major in the tile); load(x, y, v) writes the N values of an in-frame pixel.
     template <class Load>
-    void run(int w, int h, int x0, int y0, int tw, int th, const double* const (&g)[N], Load&& load, double* out) {
+    void run(int w, int h, int x0, int y0, int tw, int th, const double* const (&g)[n], Load&& load, double* out) {
         const int pw = tw + 2 * r, ph = th + 2 * r;
         const std::size_t plane = static_cast<std::size_t>(pw) * static_cast<std::size_t>(ph);
         in_.assign(plane * N, 0.0);
         rows_.resize(static_cast<std::size_t>(tw) * static_cast<std::size_t>(ph) * N);
         cols_.resize(static_cast<std::size_t>(pw) * static_cast<std::size_t>(th) * N);
-        double v[N];
+        double v[n];
         for (int j = (std::max)(0, r - y0); j < (std::min)(ph, h - y0 + r); ++j)
             for (int i = (std::max)(0, r - x0); i < (std::min)(pw, w - x0 + r); ++i) {
                 load(x0 - r + i, y0 - r + j, v);
@@ -146,9 +147,9 @@ public:
     // the same order, over the pixel's window alone (cheaper where few pixels of a tile need
     // them); the N channels side by side, so that each step is one vector operation.
     template <class Load>
-    void at(int w, int h, int x, int y, const double* const (&g)[N], Load&& load, double* out) const {
+    void at(int w, int h, int x, int y, const double* const (&g)[n], Load&& load, double* out) const {
         constexpr int d = 2 * r + 1;
-        double in[d * d][N], rows[d][N], cols[d][N], gw[r + 1][N];
+        double in[d * d][n], rows[d][n], cols[d][n], gw[r + 1][n];
         for (int a = 0; a <= r; ++a)
             for (int k = 0; k < N; ++k) gw[a][k] = g[k][a];
         const int j0 = (std::max)(0, r - y), j1 = (std::min)(d, h - y + r), i0 = (std::max)(0, r - x), i1 = (std::min)(d, w - x + r);
@@ -161,7 +162,7 @@ public:
             axis_sums(in[b * d + r], 1, gw, rows[b]);
             axis_sums(in[r * d + b], d, gw, cols[b]);
         }
-        double rc[N], cr[N];
+        double rc[n], cr[n];
         axis_sums(rows[r], 1, gw, rc);
         axis_sums(cols[r], 1, gw, cr);
         for (int k = 0; k < N; ++k) out[k] = (rc[k] + cr[k]) * 0.5;
@@ -170,16 +171,16 @@ public:
     // use(x, y, sums) at every pixel of the tile where need(x, y): the whole tile's sums
     // (run) or each needed pixel's alone (at), whichever costs less (the same bits).
     template <class Load, class Need, class Use>
-    void each(int w, int h, int x0, int y0, int tw, int th, const double* const (&g)[N], Load&& load, Need&& need, Use&& use) {
+    void each(int w, int h, int x0, int y0, int tw, int th, const double* const (&g)[n], Load&& load, Need&& need, Use&& use) {
         std::size_t needed = 0;
         for (int y = y0; y < y0 + th; ++y)
-            for (int x = x0; x < x0 + tw; ++x) needed += need(x, y) ? 1 : 0;
+            for (int x = x0; x < x0 + tw; ++x) needed += need(x, y) ? 1u : 0u;
         const bool whole = whole_tile(needed, tw, th);
         if (whole) {
             tile_.resize(static_cast<std::size_t>(tw) * static_cast<std::size_t>(th) * N);
             run(w, h, x0, y0, tw, th, g, load, tile_.data());
         }
-        double one[N];
+        double one[n];
         for (int j = 0; j < th; ++j)
             for (int i = 0; i < tw; ++i) {
                 if (!need(x0 + i, y0 + j)) continue;
@@ -198,7 +199,7 @@ public:
 
 private:
     // axis_sum of each of N channels side by side: p[i step][k], weights gw[a][k].
-    static void axis_sums(const double* p, std::ptrdiff_t step, const double (&gw)[r + 1][N], double* out) noexcept {
+    static void axis_sums(const double* p, std::ptrdiff_t step, const double (&gw)[r + 1][n], double* out) noexcept {
         const std::ptrdiff_t s = step * N;
         for (int k = 0; k < N; ++k) out[k] = gw[0][k] * p[k];
         for (int a = 1; a <= r; ++a)

@@ -493,7 +493,7 @@ inline void map_excess(const std::vector<E>& excess, int w, int h, excess_map& m
     };
     exec.run(static_cast<std::size_t>(h), [&](std::size_t y) {
         std::size_t k = 0;
-        for (std::size_t x = 0; x < n1; ++x) k += counts(y, x) ? 1 : 0;
+        for (std::size_t x = 0; x < n1; ++x) k += counts(y, x) ? 1u : 0u;
         m.start[y + 1] = k;
     });
     for (std::size_t y = 0; y < static_cast<std::size_t>(h); ++y) m.start[y + 1] += m.start[y];
@@ -545,7 +545,7 @@ inline constexpr double zero_record[record] = {};  // the side of a tap outside 
 template <int K>
 inline void tap_sums(int p2, const tap_weights& tw, const double* weights, int n, const double* line,
                      std::size_t stride, double* out) noexcept {
-    double sum[K] = {};
+    double sum[static_cast<std::size_t>(K)] = {};
     auto rec = [&](int i) { return line + static_cast<std::size_t>(i) * stride; };
     auto wk = [&](std::size_t d) { return weights + d * K; };
     const int r = static_cast<int>(tw.w.size()) - 1, shift = tw.half ? 1 : 0;

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cfloat>
 #include <cmath>
+#include <cstddef>
 #include <vector>
 
 #include "floating_point.hpp"
@@ -83,7 +84,7 @@ private:
 };
 
 // acc[c] += wk * (the class's tree of pair sums of v[j][c]) for c < n: one class's share.
-template <int Cap>
+template <std::size_t Cap>
 inline void add_class(const kernel_class& k, double wk, const double (&v)[8][Cap], int n, double* acc) {
     if (k.count == 8) {
         for (int c = 0; c < n; ++c)
@@ -102,7 +103,7 @@ inline void add_class(const kernel_class& k, double wk, const double (&v)[8][Cap
 template <int NA, int NB, class Readable, class LoadA, class LoadB>
 double kernel_sum_1_2(const gaussian_kernel& kernel, int x, int y, int w, int h, int na, int nb, Readable&& readable,
                       LoadA&& load_a, LoadB&& load_b, double* acc_a, double* acc_b) {
-    constexpr int cap_a = NA > 0 ? NA : 32, cap_b = NB > 0 ? NB : 32;
+    constexpr std::size_t cap_a = NA > 0 ? NA : 32, cap_b = NB > 0 ? NB : 32;
     const int n_a = NA > 0 ? NA : na, n_b = NB > 0 ? NB : nb;
     double wsum = 0.0;
     double va[8][cap_a], vb[8][cap_b];

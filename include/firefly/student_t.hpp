@@ -17,6 +17,7 @@
 #pragma once
 
 #include <cmath>
+#include <cstddef>
 #include <limits>
 
 #include "floating_point.hpp"
@@ -27,10 +28,10 @@ namespace detail {
 
 inline constexpr double pi = 3.14159265358979323846;
 
-template <int N>
+template <std::size_t N>
 constexpr double horner(const double (&c)[N], double x) noexcept {
     double r = c[N - 1];
-    for (int i = N - 2; i >= 0; --i) r = r * x + c[i];
+    for (int i = static_cast<int>(N) - 2; i >= 0; --i) r = r * x + c[i];
     return r;
 }
 

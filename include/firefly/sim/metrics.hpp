@@ -90,7 +90,7 @@ inline double energy_ratio(const float* img, const float* ref, std::size_t pixel
     double si = 0, sr = 0;
     for (std::size_t i = 0; i < pixels; ++i) {
         if (mask && mask[i] != want) continue;
-        for (int c = 0; c < 3; ++c) {
+        for (std::size_t c = 0; c < 3; ++c) {
             const double a = img[i * 3 + c], r = ref[i * 3 + c];
             if (!std::isfinite(a) || !std::isfinite(r)) continue;
             si += a;
@@ -169,7 +169,7 @@ accuracy evaluate_counts(const Truth& t, int k, Orig orig, Clean clean) {
             }
             if (changed) {
                 ++a.changed;
-                a.made_worse += pixel_error(c, ex) > pixel_error(o, ex) ? 1 : 0;
+                a.made_worse += pixel_error(c, ex) > pixel_error(o, ex) ? 1u : 0u;
             }
             if (lowered) {
                 ++a.lowered;
@@ -284,7 +284,8 @@ inline accuracy evaluate_buffers(const buffers& original, const std::vector<std:
     if (!detail::cleaned_fit(original, cleaned)) return detail::unfit();
     const int k = original.count();
     accuracy a = detail::evaluate_counts(
-        original, k, [&](int b) { return &original.color[b]; }, [&](int b) { return &cleaned[b]; });
+        original, k, [&](int b) { return &original.color[static_cast<std::size_t>(b)]; },
+        [&](int b) { return &cleaned[static_cast<std::size_t>(b)]; });
     const std::vector<float> combined = combine(original, cleaned);
     detail::set_combined(a, evaluate_combined(combined.data(), original.expected, original.highlight));
     return a;

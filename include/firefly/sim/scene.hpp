@@ -97,7 +97,7 @@ struct row_events {
     std::vector<bad_value> nonfinite;
     std::size_t next_ff = 0, next_neg = 0, next_bad = 0;
 
-    void draw(const scene& sc, double p_ff, int y, int b, int w, std::uint64_t n) {
+    void draw(const scene& sc, double p_ff, int y, std::size_t b, int w, std::uint64_t n) {
         ff.clear();
         negative_variance.clear();
         nonfinite.clear();
@@ -139,8 +139,9 @@ struct row_events {
 
 // One pixel of one buffer: colour and variance of the mean, and the firefly energy added.
 // Returns `fireflies` when the fireflies effect hit the pixel.
-inline std::uint32_t simulate_pixel(const scene& sc, const pixel_model& p, std::size_t i, int b, std::uint64_t n,
-                                    const hits* ff_ratio, const normal_constants& nc, buffers& out) {
+inline std::uint32_t simulate_pixel(const scene& sc, const pixel_model& p, std::size_t i,
+                                    std::size_t b, std::uint64_t n, const hits* ff_ratio,
+                                    const normal_constants& nc, buffers& out) {
     hits h;
     std::uint32_t touched = 0;
     if (ff_ratio) {
@@ -158,7 +159,7 @@ inline std::uint32_t simulate_pixel(const scene& sc, const pixel_model& p, std::
     const sample_moments o = draw_samples(base, sc.samples, p.s, m, &nc);
     const double dm = static_cast<double>(m), dk = static_cast<double>(k), dn = static_cast<double>(n);
     const double to_var_mean = p.cov * p.cov / ((dn - 1) * dn);  // m2 -> variance of the mean
-    for (int c = 0; c < 3; ++c) {
+    for (std::size_t c = 0; c < 3; ++c) {
         const double mu = p.mu[c] * p.sign;
         double mean = mu * o.mean, m2 = mu * mu * o.m2;
         if (k > 0) {  // merge with the k firefly samples (each channel gets the firefly's energy)
@@ -176,7 +177,8 @@ inline std::uint32_t simulate_pixel(const scene& sc, const pixel_model& p, std::
 }
 
 // Negative variances, NaN/Inf samples and the failed or dropped bucket, after the pixel is drawn.
-inline std::uint32_t damage_pixel(const pixel_model& p, int x, std::size_t i, int b, row_events& ev, buffers& out) {
+inline std::uint32_t damage_pixel(const pixel_model& p, int x, std::size_t i, std::size_t b,
+                                  row_events& ev, buffers& out) {
     std::uint32_t touched = 0;
     const bool covered = p.cov > 0;
     // A renderer's E[x^2] - E[x]^2 rounds below 0 where the spread is below float precision:
@@ -196,14 +198,14 @@ inline std::uint32_t damage_pixel(const pixel_model& p, int x, std::size_t i, in
     }
     if (p.bucket && b == 0) {
         const float nan = std::numeric_limits<float>::quiet_NaN();
-        for (int c = 0; c < 3; ++c) out.color[b][i * 3 + c] = out.variance[b][i * 3 + c] = nan;
+        for (std::size_t c = 0; c < 3; ++c) out.color[b][i * 3 + c] = out.variance[b][i * 3 + c] = nan;
         out.nonfinite[b][i] = 1;
     } else if (p.dropped && b == 0) {
-        for (int c = 0; c < 3; ++c) out.color[b][i * 3 + c] = out.variance[b][i * 3 + c] = 0.0f;
+        for (std::size_t c = 0; c < 3; ++c) out.color[b][i * 3 + c] = out.variance[b][i * 3 + c] = 0.0f;
         if (!out.firefly_energy[b].empty()) out.firefly_energy[b][i] = 0.0f;  // no sample was kept
         if (!out.nonfinite[b].empty()) out.nonfinite[b][i] = 0;                // nor a bad one
     } else if (p.garbage && b == 0) {
-        for (int c = 0; c < 3; ++c) out.color[b][i * 3 + c] = 1e30f;
+        for (std::size_t c = 0; c < 3; ++c) out.color[b][i * 3 + c] = 1e30f;
         out.nonfinite[b][i] = 1;
     }
     return touched;
@@ -218,7 +220,7 @@ inline void allocate(const scene& sc, int k, buffers& f) {
     f.variance = f.color;
     f.firefly_energy.assign(static_cast<std::size_t>(k), std::vector<float>());
     f.nonfinite.assign(static_cast<std::size_t>(k), std::vector<std::uint8_t>());
-    for (int b = 0; b < k; ++b) {
+    for (std::size_t b = 0; b < static_cast<std::size_t>(k); ++b) {
         if (fx & (fireflies | caustics)) f.firefly_energy[b].assign(np, 0.0f);
     if (fx & (fireflies | caustics)) f.firefly_expected.assign(np, 0.0f);
         if (fx & (nonfinite | failed_bucket | garbage_bucket)) f.nonfinite[b].assign(np, 0);
@@ -241,11 +243,12 @@ inline buffers simulate_buffers(const scene& sc, int k) {
     f.effects = sc.effects;
     detail::allocate(sc, k, f);
     const detail::layout lay(sc);
-    std::vector<detail::row_events> ev(static_cast<std::size_t>(k));
+    const std::size_t nb = static_cast<std::size_t>(k);  // (k >= 2)
+    std::vector<detail::row_events> ev(nb);
     std::vector<detail::normal_constants> nc;
-    for (int b = 0; b < k; ++b) nc.emplace_back(static_cast<std::uint64_t>(f.spp[b]));
+    for (int s : f.spp) nc.emplace_back(static_cast<std::uint64_t>(s));
     for (int y = 0; y < f.height; ++y) {
-        for (int b = 0; b < k; ++b)
+        for (std::size_t b = 0; b < nb; ++b)
             ev[b].draw(sc, lay.firefly_probability(), y, b, f.width, static_cast<std::uint64_t>(f.spp[b]));
         for (int x = 0; x < f.width; ++x) {
             const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(f.width) + static_cast<std::size_t>(x);
@@ -255,7 +258,7 @@ inline buffers simulate_buffers(const scene& sc, int k) {
             f.highlight[i] = p.highlight ? 1 : 0;
             if (!f.alpha.empty()) f.alpha[i] = static_cast<float>(p.cov);
             std::uint32_t touched = p.touched;
-            for (int b = 0; b < k; ++b) {
+            for (std::size_t b = 0; b < nb; ++b) {
                 const auto* hit = detail::row_events::at(ev[b].ff, ev[b].next_ff, x);
                 if (p.cov > 0)
                     touched |= detail::simulate_pixel(sc, p, i, b, static_cast<std::uint64_t>(f.spp[b]),
@@ -275,7 +278,7 @@ inline frame simulate(const scene& sc) {
     f.width = b.width;
     f.height = b.height;
     f.effects = b.effects;
-    for (int h = 0; h < 2; ++h) {
+    for (std::size_t h = 0; h < 2; ++h) {
         f.color[h] = std::move(b.color[h]);
         f.variance[h] = std::move(b.variance[h]);
         f.firefly_energy[h] = std::move(b.firefly_energy[h]);

@@ -115,9 +115,13 @@ struct buffers {
     int count() const noexcept { return static_cast<int>(color.size()); }
     std::size_t pixels() const noexcept { return static_cast<std::size_t>(width) * static_cast<std::size_t>(height); }
     float firefly(int b, std::size_t i) const noexcept {
-        return firefly_energy[b].empty() ? 0.0f : firefly_energy[b][i];
+        const std::vector<float>& e = firefly_energy[static_cast<std::size_t>(b)];
+        return e.empty() ? 0.0f : e[i];
     }
-    bool bad(int b, std::size_t i) const noexcept { return !nonfinite[b].empty() && nonfinite[b][i]; }
+    bool bad(int b, std::size_t i) const noexcept {
+        const std::vector<std::uint8_t>& v = nonfinite[static_cast<std::size_t>(b)];
+        return !v.empty() && v[i];
+    }
     double expected_without_fireflies(std::size_t i) const noexcept {
         const double e = (expected[i * 3] + expected[i * 3 + 1] + expected[i * 3 + 2]) / 3.0;
         return firefly_expected.empty() ? e : e - firefly_expected[i];
