@@ -124,6 +124,7 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
+#include <utility>
 #include <vector>
 
 #include "density.hpp"
@@ -434,14 +435,54 @@ inline double pixel_log_p(const pixel_buffers& p, double noise, bool with_varian
     return best;
 }
 
+
+// The K-buffer detector's scratch, kept apart from its options, executor and pair detector so
+// that a move leaves the source a fresh one (take_scratch, pipeline.hpp).
+struct cross_buffer_scratch {
+    threshold_table thresholds_{};  // at the cap level, false_alarm, every pool size
+    std::array<double, max_buffers / 2 + 1> lowest_step_{};  // each step's smallest of those
+    threshold_table frame_{};       // at the frame's level (fdr.hpp)
+    double frame_log_p_ = 0;                 // log of the largest p-value kept
+    double frame_q_ = 0;                     // the frame's level (0: nothing kept)
+    double implausible_bound_ = HUGE_VAL;    // find_implausible's bound for this frame
+    std::vector<double> log_p_;              // the candidates' p-values (log), for the level
+    std::vector<double> noise_;  // per pixel: its own relative variance of y (NaN: unknown)
+    std::vector<float> level_;   // per pixel: lower_level, its buffers' lower half (NaN: none usable)
+    std::vector<float> mean_level_;  // per pixel: the mean y of its usable buffers (NaN: none)
+    std::vector<std::uint8_t> refined_;  // per pixel: its noise pooled without the buffers flagged at the cap
+    std::vector<double> excess_;        // energy return: what was removed, 3 channels per pixel
+    std::vector<std::uint8_t> no_return_;  // energy return: pixels that get none (fewer than 3 usable
+                                           // buffers; a rebuild that took nothing)
+    std::vector<std::uint64_t> dropped_at_;  // the buffers found dropped at a pixel, bit i buffer i (empty: none)
+    dropped_scratch dropped_scratch_;
+    std::vector<dropped_pixel> dropped_found_;
+
+    energy_scratch energy_;
+    density_scratch density_;  // energy return: the finest scale's arrays
+    std::vector<density_return::light> density_light_;  // and the light it gives
+};
 }  // namespace detail
 
-class cross_buffer_detector {
+class cross_buffer_detector : private detail::cross_buffer_scratch {
 public:
     // exec and lambdas: for the K = 2 firefly::detector (and the K >= 3 rows).
     explicit cross_buffer_detector(cross_buffer_options options = {}, executor exec = {},
                                    std::shared_ptr<lambda_cache> lambdas = nullptr)
         : options_(options), exec_(exec), pair_(options.pair, exec, std::move(lambdas)) {}
+    // A moved-from detector stays usable, as a moved-from firefly::detector does.
+    cross_buffer_detector(const cross_buffer_detector&) = default;
+    cross_buffer_detector& operator=(const cross_buffer_detector&) = default;
+    cross_buffer_detector(cross_buffer_detector&& o) noexcept
+        : detail::cross_buffer_scratch(detail::take_scratch<detail::cross_buffer_scratch>(o)), options_(o.options_),
+          exec_(std::move(o.exec_)), pair_(std::move(o.pair_)) {}
+    cross_buffer_detector& operator=(cross_buffer_detector&& o) noexcept {
+        if (this == &o) return *this;
+        static_cast<detail::cross_buffer_scratch&>(*this) = detail::take_scratch<detail::cross_buffer_scratch>(o);
+        options_ = o.options_;
+        exec_ = std::move(o.exec_);
+        pair_ = std::move(o.pair_);
+        return *this;
+    }
 
     const cross_buffer_options& options() const noexcept { return options_; }
     void set_options(const cross_buffer_options& o) {
@@ -1249,28 +1290,6 @@ private:
     cross_buffer_options options_;
     executor exec_;
     detector pair_;
-    detail::threshold_table thresholds_{};  // at the cap level, false_alarm, every pool size
-    std::array<double, detail::max_buffers / 2 + 1> lowest_step_{};  // each step's smallest of those
-    detail::threshold_table frame_{};       // at the frame's level (fdr.hpp)
-    double frame_log_p_ = 0;                 // log of the largest p-value kept
-    double frame_q_ = 0;                     // the frame's level (0: nothing kept)
-    double implausible_bound_ = HUGE_VAL;    // find_implausible's bound for this frame
-    std::vector<double> log_p_;              // the candidates' p-values (log), for the level
-    std::vector<double> noise_;  // per pixel: its own relative variance of y (NaN: unknown)
-    std::vector<float> level_;   // per pixel: lower_level, its buffers' lower half (NaN: none usable)
-    std::vector<float> mean_level_;  // per pixel: the mean y of its usable buffers (NaN: none)
-    std::vector<std::uint8_t> refined_;  // per pixel: its noise pooled without the buffers flagged at the cap
-    std::vector<double> excess_;        // energy return: what was removed, 3 channels per pixel
-    std::vector<std::uint8_t> no_return_;  // energy return: pixels that get none (fewer than 3 usable
-                                           // buffers; a rebuild that took nothing)
-                                          // (left, or rebuilt without a test): none given back
-    std::vector<std::uint64_t> dropped_at_;  // the buffers found dropped at a pixel, bit i buffer i (empty: none)
-    dropped_scratch dropped_scratch_;
-    std::vector<dropped_pixel> dropped_found_;
-
-    energy_scratch energy_;
-    density_scratch density_;  // energy return: the finest scale's arrays
-    std::vector<density_return::light> density_light_;  // and the light it gives
 };
 
 }  // namespace firefly

@@ -30,6 +30,7 @@
 #include <memory>
 #include <mutex>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "bound.hpp"
@@ -256,17 +257,105 @@ struct shared_cache {
         return *this;
     }
 };
+
+// What a move leaves the source: a fresh scratch, not a member-wise moved one, in which a
+// table kept its key with its storage gone (a Gaussian kernel its width and sigma with no
+// weights: the next frame rebuilt nothing spatially and said no_valid_pixels; the binomial
+// table of find_dropped its K with no rows).
+template <class Scratch>
+Scratch take_scratch(Scratch& s) noexcept {
+    Scratch out(std::move(s));
+    s = Scratch{};
+    return out;
+}
+
+// The detector's scratch: what one frame leaves for the next to reuse, kept apart from its
+// options, executor and lambda cache so that a move can leave the source a fresh one.
+struct detector_scratch {
+    struct half_state {
+        std::vector<float> sd;
+        std::vector<std::uint8_t> label;
+        sd_histogram hist;                   // of the valid standard deviations
+        std::vector<float> select_f;         // median selection scratch
+        std::vector<double> select;          // MAD selection scratch
+        std::vector<std::uint32_t> order;    // ESD candidates, removal order
+        std::vector<std::uint64_t> keys;     // sort keys for that order
+        std::vector<std::uint64_t> keys_tmp; // and the radix sort's scratch
+        std::vector<double> removed;         // their standard deviations
+        summary rest;                        // summary of the valid pixels never removed
+        std::size_t valid = 0;
+        std::vector<std::uint32_t> fix;      // pixels to rebuild, row-major
+        std::vector<std::uint32_t> cross;    // those rebuilt from the other half
+        std::vector<double> cross_values;    // their new values, entry x channel
+        std::vector<std::uint8_t> cross_kept;  // per entry: the other half keeps an outlier
+                                               // there (read by neither half's spatial rebuild)
+        std::vector<std::uint8_t> decision;  // per entry of a list: its outcome (chunked stages)
+        std::vector<double> log_p;           // per outlier (order): the p-value (log) of a one-half
+                                             // firefly, for the frame's decision; NaN: not one
+        std::vector<stddev_counts> band_counts;  // the standard-deviation pass per row band
+        std::vector<float> before;           // return_energy: colour of the pixels to rebuild
+        std::vector<std::uint8_t> added;     // return_energy with a mask: light added here
+        std::vector<std::uint8_t> outside;   // return_energy: the ignored pixels (any there)
+        std::vector<std::uint32_t> held;     // return_energy: pixels that hold some of the rare
+        std::vector<float> held_values;      // light already, how much (RGB), and of how many
+        std::vector<std::uint8_t> held_shares;  // shares (list_held_light)
+        std::vector<std::uint32_t> left;     // pixels to rebuild that nothing reached (this frame)
+        std::vector<std::uint32_t> dropped;  // find_dropped: this half's dropped pixels, row-major
+        std::vector<std::uint32_t> implausible;  // find_implausible: its implausible pixels, row-major
+        reconstruct_scratch recon;
+    };
+
+    half_state halves_[2];
+    variance_calibration calibration_;
+    std::vector<std::uint32_t> pairs_;
+    local_test_scratch local_scratch_;
+    local_test_result local_result_;
+    dropped_scratch dropped_scratch_;
+    std::vector<dropped_pixel> dropped_found_;
+    std::vector<std::vector<std::uint64_t>> implausible_found_;  // per row band: 2 pixel + half
+    std::vector<double> frame_log_p_;  // the one-half fireflies' p-values (log), for the frame's level
+    std::vector<double> pair_log_p_;   // per pair and half: the p-value (log) of its excess; NaN: none
+    std::vector<double> pair_base_;    // per pair: the level its ordinary samples give (pair_rise)
+    std::vector<std::pair<std::uint32_t, double>> risen_;  // return_energy: pairs with a level, by pixel
+    std::vector<double> pair_level_log_p_;  // per pair: its level against its neighbourhood's
+    std::vector<double> pair_family_;  // keep_pairs_within_noise: the p-values its level comes from
+    std::vector<std::uint64_t> visit_, visit_tmp_;  // for_entries_by_row
+    struct strict_pair {               // a pair kept by the strict limit, as it was judged
+        std::uint32_t pixel;
+        double sum, se;                // its rise (pair_rise) and standard error
+    };
+    std::vector<strict_pair> spots_;   // decide_pairs: the strict highlights, by pixel
+    energy_scratch energy_;            // return_energy: one for both halves, which take turns
+    density_scratch density_;          // return_energy: the density scale's arrays
+    std::vector<density_return::light> density_light_;  // and the light it gives
+    std::vector<float> density_excess_[2];  // and each half's removed excess, by list entry
+    std::vector<std::uint32_t> density_entry_[2];  // and each pixel's entry, 1 + its index (0: none)
+    double frame_level_ = 0;           // log of the largest p-value the frame's decision keeps
+};
 }  // namespace detail
 
-class detector {
+class detector : private detail::detector_scratch {
 public:
     // lambdas: a cache shared with other detectors (one per thread, say); null: its own.
     explicit detector(detector_options options = {}, executor exec = {},
                       std::shared_ptr<lambda_cache> lambdas = nullptr)
         : options_(options), exec_(std::move(exec)),
           cache_(lambdas ? std::move(lambdas) : std::make_shared<lambda_cache>()) {}
-    // A moved-from detector stays usable: options and executor as moved, scratch empty, and
-    // the lambda cache shared with the detector it was moved to.
+    // A moved-from detector stays usable: options and executor as moved, scratch as a fresh
+    // detector's, and the lambda cache shared with the detector it was moved to.
+    detector(const detector&) = default;
+    detector& operator=(const detector&) = default;
+    detector(detector&& o) noexcept
+        : detail::detector_scratch(detail::take_scratch<detail::detector_scratch>(o)), options_(o.options_),
+          exec_(std::move(o.exec_)), cache_(o.cache_) {}
+    detector& operator=(detector&& o) noexcept {
+        if (this == &o) return *this;
+        static_cast<detail::detector_scratch&>(*this) = detail::take_scratch<detail::detector_scratch>(o);
+        options_ = o.options_;
+        exec_ = std::move(o.exec_);
+        cache_ = o.cache_;
+        return *this;
+    }
 
     const detector_options& options() const noexcept { return options_; }
     void set_options(const detector_options& o) { options_ = o; }
@@ -332,39 +421,6 @@ private:
     static constexpr std::uint8_t fix_bit = 32;          // rebuild spatially
     static constexpr std::uint8_t consistent_bit = 64;
     static constexpr std::uint8_t other_half_bit = 128;  // rebuilt from the other half
-
-    struct half_state {
-        std::vector<float> sd;
-        std::vector<std::uint8_t> label;
-        sd_histogram hist;                   // of the valid standard deviations
-        std::vector<float> select_f;         // median selection scratch
-        std::vector<double> select;          // MAD selection scratch
-        std::vector<std::uint32_t> order;    // ESD candidates, removal order
-        std::vector<std::uint64_t> keys;     // sort keys for that order
-        std::vector<std::uint64_t> keys_tmp; // and the radix sort's scratch
-        std::vector<double> removed;         // their standard deviations
-        summary rest;                        // summary of the valid pixels never removed
-        std::size_t valid = 0;
-        std::vector<std::uint32_t> fix;      // pixels to rebuild, row-major
-        std::vector<std::uint32_t> cross;    // those rebuilt from the other half
-        std::vector<double> cross_values;    // their new values, entry x channel
-        std::vector<std::uint8_t> cross_kept;  // per entry: the other half keeps an outlier
-                                               // there (read by neither half's spatial rebuild)
-        std::vector<std::uint8_t> decision;  // per entry of a list: its outcome (chunked stages)
-        std::vector<double> log_p;           // per outlier (order): the p-value (log) of a one-half
-                                             // firefly, for the frame's decision; NaN: not one
-        std::vector<stddev_counts> band_counts;  // the standard-deviation pass per row band
-        std::vector<float> before;           // return_energy: colour of the pixels to rebuild
-        std::vector<std::uint8_t> added;     // return_energy with a mask: light added here
-        std::vector<std::uint8_t> outside;   // return_energy: the ignored pixels (any there)
-        std::vector<std::uint32_t> held;     // return_energy: pixels that hold some of the rare
-        std::vector<float> held_values;      // light already, how much (RGB), and of how many
-        std::vector<std::uint8_t> held_shares;  // shares (list_held_light)
-        std::vector<std::uint32_t> left;     // pixels to rebuild that nothing reached (this frame)
-        std::vector<std::uint32_t> dropped;  // find_dropped: this half's dropped pixels, row-major
-        std::vector<std::uint32_t> implausible;  // find_implausible: its implausible pixels, row-major
-        reconstruct_scratch recon;
-    };
 
     struct neighbourhood {             // neighbourhood_at
         detail::pooled_estimate pooled;  // the local test's r~ at the pixel
@@ -1633,32 +1689,6 @@ private:
     detector_options options_;
     executor exec_;
     detail::shared_cache cache_;
-    half_state halves_[2];
-    variance_calibration calibration_;
-    std::vector<std::uint32_t> pairs_;
-    local_test_scratch local_scratch_;
-    local_test_result local_result_;
-    dropped_scratch dropped_scratch_;
-    std::vector<dropped_pixel> dropped_found_;
-    std::vector<std::vector<std::uint64_t>> implausible_found_;  // per row band: 2 pixel + half
-    std::vector<double> frame_log_p_;  // the one-half fireflies' p-values (log), for the frame's level
-    std::vector<double> pair_log_p_;   // per pair and half: the p-value (log) of its excess; NaN: none
-    std::vector<double> pair_base_;    // per pair: the level its ordinary samples give (pair_rise)
-    std::vector<std::pair<std::uint32_t, double>> risen_;  // return_energy: pairs with a level, by pixel
-    std::vector<double> pair_level_log_p_;  // per pair: its level against its neighbourhood's
-    std::vector<double> pair_family_;  // keep_pairs_within_noise: the p-values its level comes from
-    std::vector<std::uint64_t> visit_, visit_tmp_;  // for_entries_by_row
-    struct strict_pair {               // a pair kept by the strict limit, as it was judged
-        std::uint32_t pixel;
-        double sum, se;                // its rise (pair_rise) and standard error
-    };
-    std::vector<strict_pair> spots_;   // decide_pairs: the strict highlights, by pixel
-    energy_scratch energy_;            // return_energy: one for both halves, which take turns
-    density_scratch density_;          // return_energy: the density scale's arrays
-    std::vector<density_return::light> density_light_;  // and the light it gives
-    std::vector<float> density_excess_[2];  // and each half's removed excess, by list entry
-    std::vector<std::uint32_t> density_entry_[2];  // and each pixel's entry, 1 + its index (0: none)
-    double frame_level_ = 0;           // log of the largest p-value the frame's decision keeps
 };
 
 namespace detail {
