@@ -1,5 +1,6 @@
 // Inputs and edge cases that broke earlier versions, each pinned by a test.
 #include <firefly/firefly.hpp>
+#include <firefly/accumulator.hpp>
 #include <firefly/buffers.hpp>
 
 #include <algorithm>
@@ -448,4 +449,79 @@ TEST_CASE("a detector reused after options change gives a fresh detector's bits"
     detector fresh(huge), reused(huge);
     (void)cleaned_bytes(reused, calm);
     CHECK(cleaned_bytes(reused, faint) == cleaned_bytes(fresh, faint));
+}
+
+// Objects that keep a table between calls keep a key next to it (a kernel's width and sigma,
+// a binomial table's K, a histogram's count, an accumulator's size). Moved member-wise, the
+// key stayed and the storage went: a moved-from reconstruct_scratch rebuilt nothing
+// (no_valid_pixels, the firefly kept), a moved-from dropped_scratch and histogram read past
+// empty vectors (ASan SEGV), a moved-from accumulator indexed empty sums in add(). Now the key
+// goes with the move (scratch.hpp), so each source works as a new object would.
+TEST_CASE("moved-from scratch and accumulators work as new ones", "[reliability]") {
+    SECTION("reconstruct_scratch") {
+        auto rebuild = [](reconstruct_scratch& s) {
+            std::vector<float> img(16 * 12, 1.0f);
+            std::vector<std::uint8_t> mask(img.size(), 0);
+            img[5 * 16 + 7] = 1000.0f;
+            mask[5 * 16 + 7] = 1;
+            const reconstruct_report r = reconstruct(*make_image_view(img.data(), 16, 12, 1), image_view<float>{},
+                                                     mask.data(), reconstruct_options{}, s);
+            return r.error.ok() && img[5 * 16 + 7] == 1.0f;
+        };
+        reconstruct_scratch a;
+        REQUIRE(rebuild(a));
+        reconstruct_scratch b = std::move(a);
+        CHECK(rebuild(b));
+        CHECK(rebuild(a));
+        reconstruct_scratch c;
+        c = std::move(b);
+        CHECK(rebuild(b));
+    }
+    SECTION("dropped_scratch") {
+        const int w = 24, h = 24, k = 4;
+        std::vector<std::uint8_t> lone(static_cast<std::size_t>(w * h), 0);
+        for (int y = 4; y < 14; ++y)
+            for (int x = 4; x < 14; ++x) lone[static_cast<std::size_t>(y * w + x)] = 2;  // buffer 1 black
+        auto found = [&](dropped_scratch& s) {
+            std::vector<dropped_pixel> out;
+            (void)find_dropped(lone.data(), w, h, k, 0.05, s, executor{}, out);
+            return out.size();
+        };
+        dropped_scratch a;
+        const std::size_t fresh = found(a);
+        REQUIRE(fresh > 0);
+        dropped_scratch b = std::move(a);
+        CHECK(found(b) == fresh);
+        CHECK(found(a) == fresh);
+    }
+    SECTION("sd_histogram") {
+        const std::vector<float> v = {1.0f, 2.0f, 3.0f};
+        sd_histogram a;
+        a.build(v.data(), v.size());
+        sd_histogram b = std::move(a);
+        std::vector<float> sf;
+        CHECK(b.median(v.data(), v.size(), sf) == 2.0);
+        CHECK(a.total() == 0);  // as a new histogram: nothing counted
+        CHECK(a.median(v.data(), v.size(), sf) == 0.0);
+    }
+    SECTION("sample_accumulator") {
+        sample_accumulator a;
+        REQUIRE(a.reset(8, 8, 4).ok());
+        const float s[3] = {1, 2, 3};
+        REQUIRE(a.add(3, 3, 0, s).ok());
+        sample_accumulator b = std::move(a);
+        CHECK(b.samples(0, 3, 3) == 1);
+        CHECK(a.width() == 0);
+        CHECK(a.buffers() == 0);
+        CHECK(a.add(3, 3, 0, s).code() == errc::invalid_argument);  // outside its 0 x 0 image
+        CHECK(a.samples(0, 3, 3) == 0);
+        a.finish();
+        CHECK(a.views().empty());
+        REQUIRE(a.reset(4, 4, 2).ok());  // usable again
+        CHECK(a.add(1, 1, 0, s).ok());
+        sample_accumulator c;
+        c = std::move(b);
+        CHECK(b.buffers() == 0);
+        CHECK(c.samples(0, 3, 3) == 1);
+    }
 }

@@ -27,6 +27,7 @@
 
 #include "buffers.hpp"
 #include "image_view.hpp"
+#include "scratch.hpp"
 #include "status.hpp"
 
 namespace firefly {
@@ -174,7 +175,8 @@ private:
         }
     }
 
-    int w_ = 0, h_ = 0, k_ = 0, nc_ = 0;
+    // (scratch.hpp: a moved-from accumulator is empty, 0 x 0, as a new one; reset() to use it)
+    detail::reset_on_move<int> w_, h_, k_, nc_;
     std::vector<std::uint32_t> count_;   // pixel-major: K cells per pixel
     std::vector<double> mean_, m2_;      // cell-major: channels per cell
     std::vector<std::vector<float>> color_, variance_;

@@ -135,6 +135,7 @@
 #include "implausible.hpp"
 #include "parallel.hpp"
 #include "pipeline.hpp"
+#include "scratch.hpp"
 #include "status.hpp"
 #include "student_t.hpp"
 
@@ -437,7 +438,7 @@ inline double pixel_log_p(const pixel_buffers& p, double noise, bool with_varian
 
 
 // The K-buffer detector's scratch, kept apart from its options, executor and pair detector so
-// that a move leaves the source a fresh one (take_scratch, pipeline.hpp).
+// that a move leaves the source a fresh one (take_scratch, scratch.hpp).
 struct cross_buffer_scratch {
     threshold_table thresholds_{};  // at the cap level, false_alarm, every pool size
     std::array<double, max_buffers / 2 + 1> lowest_step_{};  // each step's smallest of those
@@ -725,16 +726,22 @@ private:
         p.flagged[s] = !p.finite[s];
     }
 
-    // Usable buffers sorted highest first; ties by colour, then by nothing (equal pixels).
+    // Usable buffers sorted highest first; ties by colour, then by variance (a rebuild sums the
+    // clean buffers' variances in this order: buffers of one clamped colour and different
+    // variances gave other bits when permuted), then by nothing (equal pixels).
     template <class C, class V>
-    static void sort_buffers(const buffer_view<C, V>* b, int x, int y, detail::pixel_buffers& p) {
+    static void sort_buffers(const buffer_view<C, V>* b, int x, int y, bool has_var, detail::pixel_buffers& p) {
         p.usable = 0;
         for (int i = 0; i < p.k; ++i)
             if (p.finite[static_cast<std::size_t>(i)]) p.order[static_cast<std::size_t>(p.usable++)] = i;
-        const int nc = b[0].color.channels();
-        auto colour_above = [&](int i, int j) {
+        const int nc = b[0].color.channels(), nv = has_var ? b[0].variance.channels() : 0;
+        auto colour_above = [&](int i, int j) {  // (a usable buffer's values are finite)
             for (int c = 0; c < nc; ++c) {
                 const double a = b[i].color.load(x, y, c), o = b[j].color.load(x, y, c);
+                if (a != o) return a > o;
+            }
+            for (int c = 0; c < nv; ++c) {
+                const double a = b[i].variance.load(x, y, c), o = b[j].variance.load(x, y, c);
                 if (a != o) return a > o;
             }
             return false;
@@ -783,7 +790,7 @@ private:
                             ? detail::implausible_buffers(p.level.data(), p.rel_var.data(), p.finite.data(), k, implausible_bound_) : 0;
         for (int i = 0; i < k; ++i)
             if ((p.implausible >> i) & 1u) p.finite[static_cast<std::size_t>(i)] = false, p.flagged[static_cast<std::size_t>(i)] = true;
-        sort_buffers(b, x, y, p);
+        sort_buffers(b, x, y, has_var, p);
         p.around = std::numeric_limits<double>::quiet_NaN();  // set where needed (set_around)
         p.lit_around = false;
     }

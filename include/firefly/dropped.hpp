@@ -52,6 +52,7 @@
 
 #include "image_view.hpp"
 #include "parallel.hpp"
+#include "scratch.hpp"
 
 namespace firefly {
 
@@ -108,7 +109,8 @@ public:
     std::size_t bytes() const noexcept { return row_.capacity() * sizeof(std::size_t) + tail_.capacity() * sizeof(double); }
 
 private:
-    int k_ = 0, n_max_ = -1;
+    reset_on_move<int> k_;  // (scratch.hpp: a moved-from table builds again)
+    int n_max_ = -1;
     std::vector<std::size_t> row_;
     std::vector<double> tail_;
 };
@@ -117,7 +119,7 @@ private:
 template <class Mask>
 int lowest_bit(Mask m) noexcept {
     int b = 0;
-    while (((m >> b) & 1u) == 0) ++b;
+    while (((static_cast<std::uint64_t>(m) >> b) & 1u) == 0u) ++b;
     return b;
 }
 

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "floating_point.hpp"
+#include "scratch.hpp"
 
 namespace firefly::detail {
 
@@ -79,8 +80,8 @@ public:
 
 private:
     std::vector<kernel_class> classes_;
-    int width_ = 0;
-    double sigma_ = 0;
+    reset_on_move<int> width_;  // (scratch.hpp: a moved-from kernel builds again)
+    reset_on_move<double> sigma_;
 };
 
 // acc[c] += wk * (the class's tree of pair sums of v[j][c]) for c < n: one class's share.

@@ -46,6 +46,7 @@
 #include "local_test.hpp"
 #include "parallel.hpp"
 #include "reconstruct.hpp"
+#include "scratch.hpp"
 #include "statistics.hpp"
 #include "status.hpp"
 #include "stddev.hpp"
@@ -258,19 +259,9 @@ struct shared_cache {
     }
 };
 
-// What a move leaves the source: a fresh scratch, not a member-wise moved one, in which a
-// table kept its key with its storage gone (a Gaussian kernel its width and sigma with no
-// weights: the next frame rebuilt nothing spatially and said no_valid_pixels; the binomial
-// table of find_dropped its K with no rows).
-template <class Scratch>
-Scratch take_scratch(Scratch& s) noexcept {
-    Scratch out(std::move(s));
-    s = Scratch{};
-    return out;
-}
-
 // The detector's scratch: what one frame leaves for the next to reuse, kept apart from its
-// options, executor and lambda cache so that a move can leave the source a fresh one.
+// options, executor and lambda cache so that a move leaves the source a fresh one
+// (take_scratch, scratch.hpp).
 struct detector_scratch {
     struct half_state {
         std::vector<float> sd;

@@ -33,6 +33,7 @@
 #endif
 
 #include "floating_point.hpp"
+#include "scratch.hpp"
 
 namespace firefly {
 
@@ -496,7 +497,7 @@ private:
     std::vector<std::uint32_t> hist_, spare_;
     mutable std::vector<float> band_;
     mutable std::vector<std::uint64_t> prefix_;
-    std::size_t total_ = 0;
+    detail::reset_on_move<std::size_t> total_;  // (scratch.hpp: a moved-from histogram is empty)
 };
 
 }  // namespace firefly

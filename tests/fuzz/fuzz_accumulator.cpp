@@ -11,7 +11,8 @@
 // with one sample), as float, within Welford's rounding of a two-pass long double reference;
 // no value reads Inf and no variance is negative. Then cross_buffer_detector::process() on the
 // views: a refused frame is left as it was; otherwise every colour value of a pixel-buffer not
-// marked left comes out finite.
+// marked left comes out finite. Moved out and back before finish(), the accumulator keeps its
+// sums and the moved-from one is empty.
 #include <firefly/accumulator.hpp>
 #include <fuzzer/FuzzedDataProvider.h>
 
@@ -22,6 +23,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstdio>
+#include <utility>
 #include <vector>
 
 using namespace firefly;
@@ -238,6 +240,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         case 3: add_tile<double>(p, acc, ref); break;
         default: add_one(p, acc, ref); break;
         }
+    }
+    if (p.ConsumeBool()) {  // moved out and back: the source is left a new, empty accumulator
+        sample_accumulator moved(std::move(acc));
+        const float v[4] = {1, 1, 1, 1};
+        if (acc.width() != 0 || acc.buffers() != 0 || acc.add(0, 0, 0, v).ok() || !acc.views().empty())
+            fail("a moved-from accumulator is not empty");
+        acc = std::move(moved);
     }
     acc.finish();
     for (int b = 0; b < ref.f.k; ++b)
