@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "catch.hpp"
+#include "moves.hpp"
 #include "symmetry.hpp"
 
 using namespace firefly;
@@ -371,13 +372,7 @@ TEST_CASE("K buffers: a moved-from detector still cleans", "[buffers][errors]") 
                 for (int c = 0; c < 3; ++c) earlier.color[1][static_cast<std::size_t>(3 * (6 * 20 + x) + c)] = 0.0f;
             cross_buffer_detector d;
             if (earlier_frame) REQUIRE(d.process(earlier.views()).ok());
-            cross_buffer_detector e = std::move(d);
-            CHECK(cleans_as_fresh(d));
-            CHECK(cleans_as_fresh(e));
-            cross_buffer_detector g;
-            g = std::move(e);
-            CHECK(cleans_as_fresh(e));
-            CHECK(cleans_as_fresh(g));
+            firefly_test::check_moves(d, cleans_as_fresh);
         }
     }
 }

@@ -13,6 +13,7 @@
 
 #include "catch.hpp"
 #include "frame_views.hpp"
+#include "moves.hpp"
 
 using namespace firefly;
 
@@ -470,12 +471,7 @@ TEST_CASE("moved-from scratch and accumulators work as new ones", "[reliability]
         };
         reconstruct_scratch a;
         REQUIRE(rebuild(a));
-        reconstruct_scratch b = std::move(a);
-        CHECK(rebuild(b));
-        CHECK(rebuild(a));
-        reconstruct_scratch c;
-        c = std::move(b);
-        CHECK(rebuild(b));
+        firefly_test::check_moves(a, rebuild);
     }
     SECTION("dropped_scratch") {
         const int w = 24, h = 24, k = 4;
@@ -490,9 +486,7 @@ TEST_CASE("moved-from scratch and accumulators work as new ones", "[reliability]
         dropped_scratch a;
         const std::size_t fresh = found(a);
         REQUIRE(fresh > 0);
-        dropped_scratch b = std::move(a);
-        CHECK(found(b) == fresh);
-        CHECK(found(a) == fresh);
+        firefly_test::check_moves(a, [&](dropped_scratch& s) { return found(s) == fresh; });
     }
     SECTION("sd_histogram") {
         const std::vector<float> v = {1.0f, 2.0f, 3.0f};
