@@ -81,7 +81,9 @@ inline std::atomic<std::size_t> half16_rows_converted{0};  // how often the bulk
 template <>
 struct firefly::channel_traits<firefly_examples::half16> {
     static constexpr bool is_specialized = true;
-    static double load(firefly_examples::half16 v) noexcept { return firefly_examples::half16_table()[v.bits]; }
+    static double load(firefly_examples::half16 v) noexcept {
+        return static_cast<double>(firefly_examples::half16_table()[v.bits]);
+    }
     static firefly_examples::half16 store(double v) noexcept {
         return firefly_examples::to_half(static_cast<float>(v));
     }

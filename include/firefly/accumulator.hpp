@@ -75,7 +75,7 @@ public:
             return status{errc::invalid_argument, "accumulator: sample outside the image"};
         if (count_[cell_of(x, y, sample_index)] == UINT32_MAX) return full();
         double v[4];
-        for (int c = 0; c < nc_; ++c) v[c] = value[c];
+        for (int c = 0; c < nc_; ++c) v[c] = static_cast<double>(value[c]);
         add_unchecked(x, y, sample_index, v);
         return ok_status();
     }

@@ -915,9 +915,10 @@ private:
                 if (noise_[index(i, j, w)] >= 0) all[static_cast<std::size_t>(n++)] = noise_[index(i, j, w)];
         if (n == 0) return {std::numeric_limits<double>::quiet_NaN(), 0};
         const double window_noise = median_noise(all.data(), n, k, with_var);
-        const double mp = level_[self], sp = (std::max)(window_noise, vp) * mp * mp;  // m_p's variance x K / (pi / 2)
+        const double mp = static_cast<double>(level_[self]);
+        const double sp = (std::max)(window_noise, vp) * mp * mp;  // m_p's variance x K / (pi / 2)
         auto same_level = [&](std::size_t q) {
-            const double mq = level_[q], d = mq - mp;
+            const double mq = static_cast<double>(level_[q]), d = mq - mp;
             return d * d <= 9.0 * (detail::pi / 2.0) / k * (sp + (std::max)(window_noise, noise_[q]) * mq * mq);
         };
         for (int j = (std::max)(0, y - r); j <= (std::min)(h - 1, y + r); ++j)
@@ -942,7 +943,7 @@ private:
         int n = 0;
         detail::for_each_neighbour(w, h, x, y, options_.radius, [&](std::size_t q) {
             const float m = mean_level_[q];
-            if (m == m) v[static_cast<std::size_t>(n++)] = m;
+            if (m == m) v[static_cast<std::size_t>(n++)] = static_cast<double>(m);
         });
         if (n > 0) p.around = detail::median_of(v.data(), n);
         if (!(p.around > 0)) p.lit_around = lit_pixels_around(x, y, w, h) >= 2;

@@ -378,7 +378,8 @@ private:
             for (int y = (std::max)(0, y0 - r); y < (std::min)(h_, y0 + th + r) && !any; ++y)
                 for (int x = (std::max)(0, x0 - r); x < (std::min)(w_, x0 + tw + r) && !any; ++x) any = s_->factor[index(x, y)] > 0;
             if (!any) continue;
-            sums.each(w_, h_, x0, y0, tw, th, g, [&](int x, int y, double* v) { v[0] = s_->factor[index(x, y)]; },
+            sums.each(w_, h_, x0, y0, tw, th, g,
+                      [&](int x, int y, double* v) { v[0] = static_cast<double>(s_->factor[index(x, y)]); },
                       [&](int x, int y) { return s_->removed[index(x, y)] != 0; },  // where taken() is asked
                       [&](int x, int y, const double* m) { s_->share[index(x, y)] = static_cast<float>(m[0]); });
         }

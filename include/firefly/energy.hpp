@@ -408,7 +408,7 @@ inline void median3x3_twice_rows(FillRow&& fill_row, std::vector<T>& out, int w,
         row_once.resize(n);
         auto first_median = [&](int y, double* row) {
             once.row(y, fill_row, row_once.data());
-            for (std::size_t i = 0; i < n; ++i) row[i] = row_once[i];
+            for (std::size_t i = 0; i < n; ++i) row[i] = static_cast<double>(row_once[i]);
         };
         for (int y = first; y < last; ++y) twice.row(y, first_median, &out[static_cast<std::size_t>(y) * n]);
     });
@@ -431,7 +431,7 @@ struct excess_pixel {
 // |e|^2 of one pixel's 3 channels, in double (written once: both orders square alike).
 template <class E>
 inline double squared(const E* e) noexcept {
-    const double a = e[0], b = e[1], c = e[2];
+    const double a = static_cast<double>(e[0]), b = static_cast<double>(e[1]), c = static_cast<double>(e[2]);
     return a * a + b * b + c * c;
 }
 
@@ -1111,7 +1111,7 @@ inline void energy_at(const energy_scratch& s, int x, int y, double* add) noexce
         const double* f = s.factor.data() + c;
         const double k = detail::bilinear(f[(i0 * nx + j0) * 3], f[(i0 * nx + j1) * 3], f[(i1 * nx + j0) * 3],
                                           f[(i1 * nx + j1) * 3], lx.t, ly.t);
-        add[c] = detail::returned_light(k, s.profile[p + c]);
+        add[c] = detail::returned_light(k, static_cast<double>(s.profile[p + c]));
     }
 }
 
@@ -1147,7 +1147,7 @@ public:
             for (std::size_t c = 0; c < 3; ++c) {
                 const double xy = weighted_pair(ay, by, upper_[x * 3 + c], lower_[x * 3 + c]);
                 const double yx = weighted_pair(ax, bx, along_y_[j0 * 3 + c], along_y_[j1 * 3 + c]);
-                add[x * 3 + c] = returned_light(0.5 * (xy + yx), profile[x * 3 + c]);
+                add[x * 3 + c] = returned_light(0.5 * (xy + yx), static_cast<double>(profile[x * 3 + c]));
             }
         }
     }
@@ -1235,7 +1235,8 @@ inline bool rebuilt_excess(const image_view<C>& color, int x, int y, const float
     for (int c = 0; c < 3; ++c) {
         const double d = static_cast<double>(before[c]) - color.load(x, y, c);
         f[c] = std::isfinite(d) && d > 0 ? static_cast<float>((std::min)(d, static_cast<double>(FLT_MAX))) : 0.0f;
-        if (f[c] > d) f[c] = std::nextafter(f[c], 0.0f);  // never above what was taken (return_energy_to_image)
+        if (static_cast<double>(f[c]) > d)
+            f[c] = std::nextafter(f[c], 0.0f);  // never above what was taken (return_energy_to_image)
     }
     return f[0] != 0.0f || f[1] != 0.0f || f[2] != 0.0f;
 }

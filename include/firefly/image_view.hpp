@@ -30,13 +30,13 @@ struct channel_traits {
 template <>
 struct channel_traits<float> {
     static constexpr bool is_specialized = true;
-    static constexpr double load(float v) noexcept { return v; }
+    static constexpr double load(float v) noexcept { return static_cast<double>(v); }
     // A finite value past the float range is held at +-FLT_MAX (the plain cast is undefined
     // there, +-inf in practice: finite input would give infinite output); inf and NaN stay.
     static constexpr float store(double v) noexcept {
-        return v > FLT_MAX && v <= DBL_MAX     ? FLT_MAX
-               : v < -FLT_MAX && v >= -DBL_MAX ? -FLT_MAX
-                                               : static_cast<float>(v);
+        return v > static_cast<double>(FLT_MAX) && v <= DBL_MAX     ? FLT_MAX
+               : v < -static_cast<double>(FLT_MAX) && v >= -DBL_MAX ? -FLT_MAX
+                                                                    : static_cast<float>(v);
     }
 };
 

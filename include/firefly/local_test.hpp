@@ -423,14 +423,15 @@ inline void sort_small(T* p, std::size_t n) noexcept {
 inline void median_and_mad(float* p, std::size_t n, double& med, double& mad) noexcept {
     sort_small(p, n);
     const std::size_t k = n / 2;
-    med = n % 2 ? static_cast<double>(p[k]) : 0.5 * (static_cast<double>(p[k - 1]) + p[k]);
+    med = n % 2 ? static_cast<double>(p[k])
+                : 0.5 * (static_cast<double>(p[k - 1]) + static_cast<double>(p[k]));
     std::size_t right = static_cast<std::size_t>(
         std::lower_bound(p, p + n, med, [](float a, double b) { return static_cast<double>(a) < b; }) - p);
     std::size_t left = right;  // deviations: p[left - 1] downwards, p[right] upwards
     double prev = 0, cur = 0;
     for (std::size_t t = 0; t <= k; ++t) {
-        const double dl = left > 0 ? med - p[left - 1] : HUGE_VAL;
-        const double dr = right < n ? p[right] - med : HUGE_VAL;
+        const double dl = left > 0 ? med - static_cast<double>(p[left - 1]) : HUGE_VAL;
+        const double dr = right < n ? static_cast<double>(p[right]) - med : HUGE_VAL;
         prev = cur;
         if (dl <= dr) {
             cur = dl;
@@ -874,7 +875,7 @@ inline double local_score(const local_test_options& o, const local_levels_q& k, 
     local_test_result& res = band.found;
     const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
     const double l_hi = s.level[hi][i], l_lo = s.level[1 - hi][i];
-    const double r_other = s.rel_var[1 - hi][i];
+    const double r_other = static_cast<double>(s.rel_var[1 - hi][i]);
     const double q = k.q, zq = k.zq;
     // Screens, from r~ >= r_other (m <= 1 / r_other): the pair statistic with the other half's
     // own r bounds T from above and the threshold from below; for the spatial test, the
@@ -927,7 +928,8 @@ inline double pair_log_p(const local_test_scratch& s, int w, int x, int y, int h
     const double nan = std::numeric_limits<double>::quiet_NaN();
     const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
     if (s.rel_var[0].size() <= i || s.rel_var[1].size() <= i) return nan;
-    const double r_other = s.rel_var[1 - hi][i], l_hi = s.level[hi][i], l_lo = s.level[1 - hi][i];
+    const double r_other = static_cast<double>(s.rel_var[1 - hi][i]);
+    const double l_hi = s.level[hi][i], l_lo = s.level[1 - hi][i];
     if (!(r_other == r_other) || !(s.rel_var[hi][i] == s.rel_var[hi][i]) || !(l_hi > l_lo)) return nan;
     if (!(pooled.nu == pooled.nu)) return nan;
     const double r = (std::max)(pooled.r, r_other);

@@ -620,7 +620,7 @@ private:
                 for (int x = 0; x < w; ++x) {
                     const std::size_t i = index(x, y, w);
                     if (cls(lab[0][i]) != valid_class || cls(lab[1][i]) != valid_class) continue;
-                    const double sa = sd[0][i], sb = sd[1][i];
+                    const double sa = static_cast<double>(sd[0][i]), sb = static_cast<double>(sd[1][i]);
                     const int k = detail::implausible_half(mean_colour(a.color, x, y), mean_colour(b.color, x, y),
                                                            sa * sa, sb * sb, bound);
                     if (k >= 0) implausible_found_[band].push_back(2 * static_cast<std::uint64_t>(i) + static_cast<std::uint64_t>(k));
@@ -673,8 +673,10 @@ private:
         if (b.scale > 0) {
             const double guess = b.median + b.threshold * b.scale;
             cut = guess <= static_cast<double>(FLT_MAX) ? static_cast<float>(guess) : HUGE_VALF;
-            while (cut > 0 && b.above(std::nextafter(cut, 0.0f))) cut = std::nextafter(cut, 0.0f);
-            while (std::isfinite(cut) && !b.above(cut)) cut = std::nextafter(cut, HUGE_VALF);
+            while (cut > 0 && b.above(static_cast<double>(std::nextafter(cut, 0.0f))))
+                cut = std::nextafter(cut, 0.0f);
+            while (std::isfinite(cut) && !b.above(static_cast<double>(cut)))
+                cut = std::nextafter(cut, HUGE_VALF);
         }
         const double med = b.median;
         // One pass: the candidates (>= cut: exactly the values the bound counts, the top
@@ -705,7 +707,7 @@ private:
         }
         s.order.resize(m);
         s.removed.resize(m);
-        for (std::size_t j = 0; j < m; ++j) s.removed[j] = sd[s.order[j]];
+        for (std::size_t j = 0; j < m; ++j) s.removed[j] = static_cast<double>(sd[s.order[j]]);
         s.rest = summary{};
         if (rest_n > 0) {
             s.rest.count = rest_n;
@@ -1402,7 +1404,8 @@ private:
                     double l = 0;  // the cleaned halves' level, positive finite parts
                     for (int k = 0; k < 2; ++k) {
                         const std::uint32_t e = density_entry_[k][p];
-                        v[3 * k + c] = e ? density_excess_[k][(e - 1) * 3 + static_cast<std::size_t>(c)] : 0.0f;
+                        v[3 * k + c] = static_cast<double>(
+                            e ? density_excess_[k][(e - 1) * 3 + static_cast<std::size_t>(c)] : 0.0f);
                         if (cls(halves_[k].label[p]) == ignored_class) continue;
                         const double c_k = hb[k]->color.load(x, y, c);  // (ignored: no part of the level)
                         l += std::isfinite(c_k) && c_k > 0 ? c_k : 0.0;
@@ -1414,7 +1417,8 @@ private:
 #else
                     v[6] += both * both;
 #endif
-                    v[7] += static_cast<float>((std::min)(l, static_cast<double>(FLT_MAX)));
+                    v[7] += static_cast<double>(
+                        static_cast<float>((std::min)(l, static_cast<double>(FLT_MAX))));
                 }
             };
             // Light cannot land on an ignored or non-finite pixel (in either half: one s); a kept
@@ -1457,8 +1461,11 @@ private:
             const bool rebuilt = e < s.fix.size() && s.fix[e] == i;
             const double f = rebuilt ? taken(e) : 0.0;
             for (int c = 0; c < 3; ++c) {
-                add[c] = l.add[k][c];
-                if (rebuilt) add[c] = (std::min)(add[c], f * excess[e * 3 + static_cast<std::size_t>(c)]);
+                add[c] = static_cast<double>(l.add[k][c]);
+                if (rebuilt) {
+                    const float ex = excess[e * 3 + static_cast<std::size_t>(c)];
+                    add[c] = (std::min)(add[c], f * static_cast<double>(ex));
+                }
             }
             if (!(add[0] + add[1] + add[2] > 0)) continue;
             if (!add_light(hb.color, x, y, add, old)) {
@@ -1474,11 +1481,11 @@ private:
             const auto [x, y] = xy(s.fix[j]);
             for (int c = 0; c < 3; ++c) {
                 const float ex = excess[j * 3 + static_cast<std::size_t>(c)];
-                const double rest = hb.color.load(x, y, c) + ex * (1.0 - f);
+                const double rest = hb.color.load(x, y, c) + static_cast<double>(ex) * (1.0 - f);
                 float b = static_cast<float>(rest);
-                if (b > rest) b = std::nextafter(b, -HUGE_VALF);
+                if (static_cast<double>(b) > rest) b = std::nextafter(b, -HUGE_VALF);
                 s.before[j * 3 + static_cast<std::size_t>(c)] = b;
-                t.removed += ex * f / 3.0;
+                t.removed += static_cast<double>(ex) * f / 3.0;
             }
         }
     }
@@ -1497,7 +1504,8 @@ private:
             for (int c = 0; c < nc; ++c) {
                 const double v = hb.color.load(detail::column_of(s.fix[e], w), detail::row_of(s.fix[e], w), c);
                 float f = static_cast<float>(v);
-                if (f > v) f = std::nextafter(f, -HUGE_VALF);  // never above the input (a double view)
+                if (static_cast<double>(f) > v)
+                    f = std::nextafter(f, -HUGE_VALF);  // never above the input (a double view)
                 s.before[e * 3 + static_cast<std::size_t>(c)] = f;
             }
         }

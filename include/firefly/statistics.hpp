@@ -370,7 +370,7 @@ public:
         scratch.resize(detail::count_and_collect(v, n, 1.0f, 0.0f, lo, hi_incl, scratch.data(), none));
         auto first = scratch.begin() + static_cast<std::ptrdiff_t>(k - below);
         std::nth_element(scratch.begin(), first, scratch.end());
-        const double a = *first;
+        const double a = static_cast<double>(*first);
         const double b = (k2 == k) ? a : static_cast<double>(*std::min_element(first + 1, scratch.end()));
         return 0.5 * a + 0.5 * b;
     }

@@ -72,26 +72,26 @@ Real incbeta_cf(Real a, Real b, Real x) noexcept {
     Real c = 1;
     Real d = 1 - qab * x / qap;
     if (std::fabs(d) < tiny) d = tiny;
-    d = 1.0 / d;
+    d = Real(1.0) / d;
     Real h = d;
     for (int m = 1; m <= 200000; ++m) {
         const Real m2 = Real(2 * m);
         Real aa = m * (b - m) * x / ((qam + m2) * (a + m2));
-        d = 1.0 + aa * d;
+        d = Real(1.0) + aa * d;
         if (std::fabs(d) < tiny) d = tiny;
-        c = 1.0 + aa / c;
+        c = Real(1.0) + aa / c;
         if (std::fabs(c) < tiny) c = tiny;
-        d = 1.0 / d;
+        d = Real(1.0) / d;
         h *= d * c;
         aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2));
-        d = 1.0 + aa * d;
+        d = Real(1.0) + aa * d;
         if (std::fabs(d) < tiny) d = tiny;
-        c = 1.0 + aa / c;
+        c = Real(1.0) + aa / c;
         if (std::fabs(c) < tiny) c = tiny;
-        d = 1.0 / d;
+        d = Real(1.0) / d;
         const Real del = d * c;
         h *= del;
-        if (std::fabs(del - 1.0) <= eps) break;
+        if (std::fabs(del - Real(1.0)) <= eps) break;
     }
     return h;
 }
@@ -110,20 +110,20 @@ t_tail<Real> student_t_tail(Real t, Real df) noexcept {
     const Real r = t / std::sqrt(df);
     // L1 = log(1 + r^2), log x = -L1, log y = log(r^2 / (1 + r^2)); no overflow for huge r.
     Real L1, log_y, x, y;
-    if (r > 1e150) {
-        L1 = 2.0 * std::log(r);
-        log_y = 0.0;
-        x = 0.0;
-        y = 1.0;
+    if (r > Real(1e150)) {
+        L1 = Real(2.0) * std::log(r);
+        log_y = Real(0.0);
+        x = Real(0.0);
+        y = Real(1.0);
     } else {
         const Real r2 = r * r;
         L1 = std::log1p(r2);
-        x = 1.0 / (1.0 + r2);
-        if (r >= 1.0) {
-            y = 1.0 / (1.0 + 1.0 / r2);
-            log_y = -std::log1p(1.0 / r2);
+        x = Real(1.0) / (Real(1.0) + r2);
+        if (r >= Real(1.0)) {
+            y = Real(1.0) / (Real(1.0) + Real(1.0) / r2);
+            log_y = -std::log1p(Real(1.0) / r2);
         } else {
-            y = r2 / (1.0 + r2);
+            y = r2 / (Real(1.0) + r2);
             log_y = r2 > 0 ? std::log(r2) - L1 : -std::numeric_limits<Real>::infinity();
         }
     }
@@ -254,7 +254,7 @@ inline double student_t_upper_quantile(double q, double df) noexcept {
 
 template <class Real>
 Real detail::student_t_upper_quantile_refined(Real q, Real df, double z) noexcept {
-    Real t = hill_start(static_cast<double>(q), static_cast<double>(df), z);
+    Real t = static_cast<Real>(hill_start(static_cast<double>(q), static_cast<double>(df), z));
     if (!(t > 0) || std::isinf(t)) t = z > 0 ? Real(z) : Real(1);
     const bool tail_mode = q < Real(0.25);
     const Real log_q = std::log(q);

@@ -75,8 +75,8 @@ struct combined_accuracy {
 inline double relmse(const float* img, const float* ref, std::size_t pixels) {
     double s = 0;
     for (std::size_t i = 0; i < pixels * 3; ++i) {
-        const double d = static_cast<double>(img[i]) - ref[i];
-        const double e = d * d / (static_cast<double>(ref[i]) * ref[i] + 0.01);
+        const double d = static_cast<double>(img[i]) - static_cast<double>(ref[i]);
+        const double e = d * d / (static_cast<double>(ref[i]) * static_cast<double>(ref[i]) + 0.01);
         s += std::isfinite(e) ? e : 1e6;
     }
     return pixels ? s / static_cast<double>(pixels * 3) : 0.0;
@@ -91,7 +91,7 @@ inline double energy_ratio(const float* img, const float* ref, std::size_t pixel
     for (std::size_t i = 0; i < pixels; ++i) {
         if (mask && mask[i] != want) continue;
         for (std::size_t c = 0; c < 3; ++c) {
-            const double a = img[i * 3 + c], r = ref[i * 3 + c];
+            const double a = static_cast<double>(img[i * 3 + c]), r = static_cast<double>(ref[i * 3 + c]);
             if (!std::isfinite(a) || !std::isfinite(r)) continue;
             si += a;
             sr += r;
@@ -105,8 +105,8 @@ inline double energy_ratio(const float* img, const float* ref, std::size_t pixel
 inline double pixel_error(const float* px, const float* ref) {
     double e = 0;
     for (int c = 0; c < 3; ++c) {
-        const double d = static_cast<double>(px[c]) - ref[c];
-        e += d * d / (static_cast<double>(ref[c]) * ref[c] + 0.01);
+        const double d = static_cast<double>(px[c]) - static_cast<double>(ref[c]);
+        e += d * d / (static_cast<double>(ref[c]) * static_cast<double>(ref[c]) + 0.01);
     }
     return std::isfinite(e) ? e : std::numeric_limits<double>::infinity();
 }
@@ -163,7 +163,7 @@ accuracy evaluate_counts(const Truth& t, int k, Orig orig, Clean clean) {
             const bool lowered = changed && lowered_from(o, c);
             const bool hit = t.firefly(b, i) > 0 || t.bad(b, i);
             clean_lowered_here = clean_lowered_here || (lowered && !hit);
-            if (t.firefly(b, i) > 0 && t.firefly(b, i) > 10.0 * std::fabs(expected)) {
+            if (t.firefly(b, i) > 0 && static_cast<double>(t.firefly(b, i)) > 10.0 * std::fabs(expected)) {
                 ++a.visible;
                 vis_hit += lowered ? 1 : 0;
             }

@@ -93,8 +93,9 @@ struct frame {
     bool bad(int which, std::size_t i) const noexcept { return !nonfinite[which].empty() && nonfinite[which][i]; }
     // Mean expected radiance over the channels without the fireflies' share.
     double expected_without_fireflies(std::size_t i) const noexcept {
-        const double e = (expected[i * 3] + expected[i * 3 + 1] + expected[i * 3 + 2]) / 3.0;
-        return firefly_expected.empty() ? e : e - firefly_expected[i];
+        const double e =
+            static_cast<double>(expected[i * 3] + expected[i * 3 + 1] + expected[i * 3 + 2]) / 3.0;
+        return firefly_expected.empty() ? e : e - static_cast<double>(firefly_expected[i]);
     }
 };
 
@@ -123,8 +124,9 @@ struct buffers {
         return !v.empty() && v[i];
     }
     double expected_without_fireflies(std::size_t i) const noexcept {
-        const double e = (expected[i * 3] + expected[i * 3 + 1] + expected[i * 3 + 2]) / 3.0;
-        return firefly_expected.empty() ? e : e - firefly_expected[i];
+        const double e =
+            static_cast<double>(expected[i * 3] + expected[i * 3 + 1] + expected[i * 3 + 2]) / 3.0;
+        return firefly_expected.empty() ? e : e - static_cast<double>(firefly_expected[i]);
     }
 };
 
