@@ -57,8 +57,9 @@ add_library(firefly_readme_snippets OBJECT ${_sources})
 target_link_libraries(firefly_readme_snippets PRIVATE firefly::firefly)
 target_include_directories(firefly_readme_snippets PRIVATE "${PROJECT_SOURCE_DIR}/examples")
 # Examples declare what they show and may leave it unused (a tile view, a report); they and
-# the headers they instantiate meet -Wsign-conversion, which the unit tests turn off.
-target_compile_options(firefly_readme_snippets PRIVATE ${FIREFLY_WARNINGS} -Wsign-conversion -Werror
+# the headers they instantiate meet -Wsign-conversion (which the unit tests turn off) and
+# -Wdouble-promotion.
+target_compile_options(firefly_readme_snippets PRIVATE ${FIREFLY_WARNINGS} -Wsign-conversion -Wdouble-promotion -Werror
                        -fno-exceptions -Wno-unused-variable -Wno-unused-but-set-variable
                        -Wno-unused-parameter)
 add_custom_target(firefly_readme_examples ALL DEPENDS firefly_readme_snippets)
