@@ -78,8 +78,8 @@ struct reference {
 };
 
 // One input: how it is read, the accumulator and what it should hold.
-struct session {
-    session(FuzzedDataProvider& provider, bool extended_format) : p(provider), extended(extended_format) {}
+struct one_input {
+    one_input(FuzzedDataProvider& provider, bool extended_format) : p(provider), extended(extended_format) {}
     FuzzedDataProvider& p;
     bool extended;          // the "acc2" format
     sample_accumulator acc;
@@ -116,7 +116,7 @@ void expect_refused(const status& st, errc code, const char* what) {
     }
 }
 
-void add_one(session& s) {
+void add_one(one_input& s) {
     FuzzedDataProvider& p = s.p;
     const frame_shape& f = s.ref.f;
     const int x = p.ConsumeIntegralInRange<int>(-1, f.w), y = p.ConsumeIntegralInRange<int>(-1, f.h);
@@ -193,13 +193,13 @@ tile_place any_place(FuzzedDataProvider& p, const frame_shape& f) {
 
 // A renderer's pass (extended format): the whole frame at the next sample index, so that a
 // few bytes fill K = 17 buffers or more at every pixel.
-tile_place next_pass(session& s) {
+tile_place next_pass(one_input& s) {
     const frame_shape& f = s.ref.f;
     return {f.w, f.h, 0, 0, f.nc, s.passes++};
 }
 
 template <class T>
-void add_tile(session& s, const tile_place& t) {
+void add_tile(one_input& s, const tile_place& t) {
     FuzzedDataProvider& p = s.p;
     const frame_shape& f = s.ref.f;
     tile_memory<T> m = lay_out<T>(p, s.extended, t.tw, t.th, t.nc);
@@ -224,7 +224,7 @@ void add_tile(session& s, const tile_place& t) {
 }
 
 // A frame's shape, and a reset the accumulator must refuse now and then (nothing changes).
-bool reset(session& s) {
+bool reset(one_input& s) {
     FuzzedDataProvider& p = s.p;
     frame_shape f{p.ConsumeIntegralInRange<int>(1, 8), p.ConsumeIntegralInRange<int>(1, 8), buffer_count(p, s.extended),
                   p.ConsumeIntegralInRange<int>(1, 4)};
@@ -345,7 +345,7 @@ std::vector<std::uint32_t> bits_of(sample_accumulator& acc, const frame_shape& f
 
 // finish() and every buffer pixel against its samples since the reset (before the first
 // finish(), the views read 0); a second finish() reads the same sums: the same bytes.
-void finish_and_check(session& s) {
+void finish_and_check(one_input& s) {
     const frame_shape& f = s.ref.f;
     check_views(s.acc, f);
     if (!s.finished)
@@ -572,7 +572,7 @@ void check_process(sample_accumulator& acc, const frame_shape& f, bool use_varia
 // Between the adds (extended format): finish(), process() on the views, and finish() again,
 // which must write the accumulator's own means back over what process() cleaned. At most two
 // rounds an input (each runs two detectors).
-void process_round(session& s) {
+void process_round(one_input& s) {
     if (s.rounds == 2) return;
     ++s.rounds;
     finish_and_check(s);
@@ -588,7 +588,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const bool extended = size >= sizeof extended_tag && std::memcmp(data, extended_tag, sizeof extended_tag) == 0;
     if (extended) data += sizeof extended_tag, size -= sizeof extended_tag;
     FuzzedDataProvider p(data, size);
-    session s(p, extended);
+    one_input s(p, extended);
     while (!reset(s))
         if (p.remaining_bytes() == 0) return 0;
     const int calls = p.ConsumeIntegralInRange<int>(0, 400);
