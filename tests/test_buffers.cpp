@@ -19,44 +19,16 @@
 #include <vector>
 
 #include "catch.hpp"
+#include "buffer_views.hpp"
 #include "moves.hpp"
 #include "symmetry.hpp"
 
 using namespace firefly;
+using firefly_test::frame_k;
+using firefly_test::from_sim;
+using firefly_test::masks_k;
 
 namespace {
-
-struct frame_k {
-    int w = 0, h = 0;
-    std::vector<std::vector<float>> color, variance;
-    std::vector<buffer_view<float>> views(bool with_variance = true) {
-        std::vector<buffer_view<float>> v;
-        for (std::size_t b = 0; b < color.size(); ++b)
-            v.push_back({*make_image_view(color[b].data(), w, h, 3),
-                         with_variance ? *make_image_view(variance[b].data(), w, h, 3) : image_view<float>{}});
-        return v;
-    }
-};
-
-// One frame-sized mask per buffer and the views the detector writes them through.
-struct masks_k {
-    std::vector<std::vector<std::uint8_t>> mem;
-    std::vector<image_view<std::uint8_t>> views;
-    masks_k(int k, int w, int h) : mem(static_cast<std::size_t>(k), std::vector<std::uint8_t>(static_cast<std::size_t>(w * h))) {
-        for (auto& m : mem) views.push_back(*make_image_view(m.data(), w, h));
-    }
-    masks_k(const masks_k&) = delete;  // the views point into mem
-    masks_k& operator=(const masks_k&) = delete;
-};
-
-frame_k from_sim(const sim::buffers& f) {
-    frame_k r;
-    r.w = f.width;
-    r.h = f.height;
-    r.color = f.color;
-    r.variance = f.variance;
-    return r;
-}
 
 // A smooth frame with gamma-like noise per buffer, from a small deterministic generator.
 frame_k noisy_frame(int k, int w, int h, std::uint64_t seed) {

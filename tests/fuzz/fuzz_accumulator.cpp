@@ -32,6 +32,7 @@
 #include <firefly/accumulator.hpp>
 #include <fuzzer/FuzzedDataProvider.h>
 
+#include "../buffer_views.hpp"
 #include "fuzz_values.hpp"
 
 #include <cfloat>
@@ -49,6 +50,8 @@ using namespace firefly;
 namespace {
 
 [[noreturn]] void fail(const char* what) { fuzz_values::fail("fuzz_accumulator", what); }
+using firefly_test::masks_k;
+using fuzz_values::same_bits;
 using fuzz_values::value;
 
 // The extended format's tag (the first four bytes of an input).
@@ -407,20 +410,6 @@ struct buffer_copy {
     }
 };
 
-// One run's masks, filled with highlight first: no K >= 3 mask says highlight, so a mask pixel
-// left unwritten shows (check_masks).
-struct mask_set {
-    std::vector<std::vector<std::uint8_t>> memory;
-    std::vector<image_view<std::uint8_t>> views;
-    explicit mask_set(const frame_shape& f)
-        : memory(static_cast<std::size_t>(f.k), std::vector<std::uint8_t>(f.pixels(), mask_bits::highlight)) {
-        for (auto& m : memory) views.push_back(*make_image_view(m.data(), f.w, f.h));
-    }
-    mask_set(const mask_set&) = delete;
-    std::uint8_t at(std::size_t b, std::size_t p) const { return memory[b][p]; }
-};
-
-bool same_bits(double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; }
 
 // Everything a half's report says but its timings and the detector's memory.
 bool same_half(const half_report& a, const half_report& b) {
@@ -475,7 +464,7 @@ void check_report(const cross_buffer_report& r, const frame_shape& f, const cros
 // buffers, and they count what the report does (nonfinite: non-finite and implausible
 // buffers). K = 2 (pipeline.hpp's half_report): per half, left on its unreachable pixels,
 // nonfinite on its non-finite and implausible ones, dropped on its dropped ones.
-void check_masks(const mask_set& m, const buffer_copy& input, const frame_shape& f, const cross_buffer_report& r) {
+void check_masks(const masks_k& m, const buffer_copy& input, const frame_shape& f, const cross_buffer_report& r) {
     constexpr std::uint8_t found = mask_bits::firefly | mask_bits::nonfinite | mask_bits::dropped;
     constexpr std::uint8_t nonfinite_left = mask_bits::nonfinite | mask_bits::left, dropped_left = mask_bits::dropped | mask_bits::left;
     const std::size_t k = static_cast<std::size_t>(f.k);
@@ -484,7 +473,7 @@ void check_masks(const mask_set& m, const buffer_copy& input, const frame_shape&
     for (std::size_t p = 0; p < f.pixels(); ++p) {
         int on = 0, marked_left = 0;
         for (std::size_t b = 0; b < k; ++b) {
-            const std::uint8_t v = m.at(b, p);
+            const std::uint8_t v = m.mem[b][p];
             if (!input.finite_at(b, p) && !(v & mask_bits::nonfinite)) fail("a NaN or Inf input is not marked nonfinite");
             if ((v & mask_bits::left) && !(v & found)) fail("a mask says left without what was found");
             left[b] += (v & mask_bits::left) != 0;
@@ -540,13 +529,15 @@ void check_process(sample_accumulator& acc, const frame_shape& f, bool use_varia
     cross_buffer_options o;
     o.use_variance = use_variance;
     cross_buffer_detector fresh(o);
-    mask_set masks(f), reused_masks(f);
+    // (filled with highlight first: no K >= 3 mask says highlight, so a mask pixel left
+    // unwritten shows in check_masks)
+    masks_k masks(f.k, f.w, f.h, mask_bits::highlight), reused_masks(f.k, f.w, f.h, mask_bits::highlight);
     const cross_buffer_report r = fresh.process(acc.views(), masks.views);
     static cross_buffer_detector reused;
     reused.set_options(o);
     const cross_buffer_report rr = reused.process(reused_output.views, reused_masks.views);
     const buffer_copy output(acc.views(), f);
-    if (!output.same_bytes(reused_output) || masks.memory != reused_masks.memory || !same_report(r, rr)) {
+    if (!output.same_bytes(reused_output) || masks.mem != reused_masks.mem || !same_report(r, rr)) {
         std::fprintf(stderr, "K %d %dx%d, %d channels: %s / %s\n", f.k, f.w, f.h, f.nc, r.error.message(), rr.error.message());
         fail("a reused detector gave other bytes than a fresh one");
     }
@@ -558,7 +549,7 @@ void check_process(sample_accumulator& acc, const frame_shape& f, bool use_varia
     check_masks(masks, input, f, r);
     for (std::size_t b = 0; b < static_cast<std::size_t>(f.k); ++b)
         for (std::size_t p = 0; p < f.pixels(); ++p) {
-            if (masks.at(b, p) & mask_bits::left) continue;
+            if (masks.mem[b][p] & mask_bits::left) continue;
             if (!output.finite_at(b, p)) {
                 std::fprintf(stderr, "K %d %dx%d, %d channels: buffer %zu pixel %zu (%s)\n", f.k, f.w, f.h, f.nc, b, p,
                              r.error.message());

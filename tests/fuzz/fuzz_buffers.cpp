@@ -15,6 +15,7 @@
 #include <firefly/buffers.hpp>
 #include <fuzzer/FuzzedDataProvider.h>
 
+#include "../buffer_views.hpp"
 #include "fuzz_values.hpp"
 
 #include <cmath>
@@ -28,6 +29,8 @@ using namespace firefly;
 namespace {
 
 [[noreturn]] void fail(const char* what) { fuzz_values::fail("fuzz_buffers", what); }
+using firefly_test::masks_k;
+using fuzz_values::same_bits;
 using fuzz_values::value;
 
 // One image of one buffer: interleaved, pixel stride nc + pad, row stride w (nc + pad) + rowpad.
@@ -61,23 +64,6 @@ image_view<T> view_of(image_storage<T>& s, int w, int h) {
 struct frame_shape {
     int k, w, h, nc, nv;
 };
-
-// One frame-sized mask per buffer, zeroed, and the views the detector writes them through.
-struct frame_masks {
-    std::vector<std::vector<std::uint8_t>> mem;
-    std::vector<image_view<std::uint8_t>> views;
-    explicit frame_masks(const frame_shape& f)
-        : mem(static_cast<std::size_t>(f.k), std::vector<std::uint8_t>(static_cast<std::size_t>(f.w * f.h), 0)) {
-        for (auto& m : mem) views.push_back(*make_image_view(m.data(), f.w, f.h));
-    }
-    frame_masks(const frame_masks&) = delete;  // the views point into mem
-    frame_masks& operator=(const frame_masks&) = delete;
-};
-
-template <class T>
-bool same_bits(const T& a, const T& b) {
-    return std::memcmp(&a, &b, sizeof(T)) == 0;
-}
 
 // The assertions on one pixel-buffer of a processed frame (see the top of the file). Views
 // may be flipped: view row y is storage row h - 1 - y.
@@ -204,7 +190,7 @@ void run(FuzzedDataProvider& p) {
         if (f.nv) views[static_cast<std::size_t>(i)].variance = view_of(s[1][static_cast<std::size_t>(i)], w, h);
     }
     const std::vector<image_storage<T>> before[2] = {s[0], s[1]};
-    frame_masks pm(f), dm(f);  // process()'s and detect()'s
+    masks_k pm(f.k, f.w, f.h), dm(f.k, f.w, f.h);  // process()'s and detect()'s
     const auto &mask = pm.mem, &dmask = dm.mem;
 
     // Detection first, on const views of the input: it must change nothing, and process()

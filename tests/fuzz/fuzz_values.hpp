@@ -1,4 +1,5 @@
-// The fuzz targets' shared pieces: how a target fails, and the values it feeds the detectors.
+// The fuzz targets' shared pieces: how a target fails, how it compares values, and the values
+// it feeds the detectors.
 #pragma once
 
 #include <fuzzer/FuzzedDataProvider.h>
@@ -16,6 +17,12 @@ namespace fuzz_values {
 [[noreturn]] inline void fail(const char* target, const char* what) {
     std::fprintf(stderr, "%s: %s\n", target, what);
     std::abort();
+}
+
+// Whether a and b hold the same bytes (NaN payloads and the sign of 0 included).
+template <class T>
+bool same_bits(const T& a, const T& b) {
+    return std::memcmp(&a, &b, sizeof(T)) == 0;
 }
 
 // A value: mostly plausible radiance (so that fireflies occur), sometimes a special value or
